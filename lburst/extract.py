@@ -1,0 +1,180 @@
+"""LBurst feature extraction: dense maps at one scale and multi-scale keypoints.
+
+Pixel convention (used throughout lburst): a keypoint ``(x, y)`` is in pixels of the
+burst's common (middle) frame at full resolution, with pixel *centres* at integer
+coordinates: ``(0, 0)`` is the centre of the top-left pixel (as in OpenCV and hloc;
+add 0.5 for COLMAP).  The published extractor maps a keypoint found at ``(x, y)`` in
+a level resized to ``w x h`` back as ``x * W / w``, which is off by
+``0.5 * (W / w - 1)`` pixels; lburst maps it as ``(x + 0.5) * W / w - 0.5`` unless
+``published_coordinates=True``.  At full scale both agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from lburst.features import Features
+from lburst.model import LBurstNet, load_checkpoint, normalize_burst
+
+
+@dataclass(frozen=True)
+class MultiScaleConfig:
+    """Multi-scale detection settings; defaults are the paper's.
+
+    Attributes:
+        min_size: smallest long side of a pyramid level, in pixels.
+        max_size: largest long side of a pyramid level, in pixels.
+        scale_factor: ratio between consecutive levels.
+        min_scale, max_scale: bounds on the level's scale relative to the input.
+        rel_thr, rep_thr: reliability and repeatability thresholds for keypoints.
+        top_k: keep the best ``top_k`` keypoints by score (``None``: all).
+        published_coordinates: map level coordinates as the published code does
+            (``x * W / w``) instead of the pixel-centre-correct mapping.
+    """
+
+    min_size: int = 256
+    max_size: int = 1024
+    scale_factor: float = 2**0.25
+    min_scale: float = 0.0
+    max_scale: float = 1.0
+    rel_thr: float = 0.7
+    rep_thr: float = 0.7
+    top_k: int | None = 4000
+    published_coordinates: bool = False
+
+
+def frame_permutation(n: int, order: str) -> list[int]:
+    """Indices that reorder a temporally ordered burst of ``n`` frames.
+
+    ``'temporal'`` keeps ``[-h, ..., 0, ..., h]``.  ``'published'`` is the order the
+    published LBurst weights were trained with: ``[-1, -2, ..., -h, 0, 1, ..., h]``
+    (for 5 frames ``[-1, -2, 0, +1, +2]``).
+    """
+    if order == "temporal":
+        return list(range(n))
+    if order == "published":
+        h = n // 2
+        return [h - k for k in range(1, h + 1)] + list(range(h, n))
+    raise ValueError(f"unknown frame order {order!r}: use 'temporal' or 'published'")
+
+
+def _local_maxima(rep: torch.Tensor, rel: torch.Tensor, cfg: MultiScaleConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    """(y, x) of 3x3 local maxima of ``rep`` (1,1,h,w) passing both thresholds."""
+    maxima = rep == F.max_pool2d(rep, kernel_size=3, stride=1, padding=1)
+    maxima &= rep >= cfg.rep_thr
+    maxima &= rel >= cfg.rel_thr
+    yx = maxima[0, 0].nonzero()
+    return yx[:, 0], yx[:, 1]
+
+
+class LBurst:
+    """Feature extractor for robotic bursts (or single images with a 1-frame net).
+
+    Example::
+
+        model = LBurst.from_checkpoint("lburst-b5.pt")
+        feats = model.extract(burst)          # burst: (N, H, W, 3) uint8
+        feats["keypoints"]                    # (K, 2) float32, x, y
+    """
+
+    def __init__(self, net: LBurstNet, device: str | torch.device = "cpu", frame_order: str = "temporal") -> None:
+        self.device = torch.device(device)
+        self.net = net.eval().to(self.device)
+        self.frames = net.config.frames
+        self.frame_order = frame_order
+        self._perm = frame_permutation(self.frames, frame_order)
+
+    @classmethod
+    def from_checkpoint(
+        cls, path: str | Path, device: str | torch.device | None = None, frame_order: str = "temporal"
+    ) -> "LBurst":
+        """Load a published or lburst checkpoint (see :func:`lburst.model.load_checkpoint`)."""
+        device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+        net, _ = load_checkpoint(path, device)
+        return cls(net, device, frame_order)
+
+    @classmethod
+    def pretrained(cls, name: str = "lburst-b5", device: str | torch.device | None = None) -> "LBurst":
+        """Load weights shipped with the package (``'lburst-b5'`` or ``'lburst-b1'``)."""
+        from lburst.weights import weights_path
+
+        return cls.from_checkpoint(weights_path(name), device)
+
+    def _input(self, burst: np.ndarray) -> torch.Tensor:
+        burst = np.asarray(burst)
+        if burst.ndim == 3:  # a single image
+            burst = burst[None]
+        if burst.ndim != 4 or burst.shape[-1] != 3:
+            raise ValueError(f"expected a burst (N, H, W, 3) or an image (H, W, 3), got shape {burst.shape}")
+        n = burst.shape[0]
+        if n != self.frames:
+            if self.frames == 1 and n % 2 == 1:
+                burst = burst[n // 2 : n // 2 + 1]  # single-image net: the common frame
+            else:
+                raise ValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
+        return normalize_burst(burst[self._perm], self.device)
+
+    @torch.inference_mode()
+    def dense(self, burst: np.ndarray) -> Features:
+        """Dense outputs at the input's resolution.
+
+        Returns ``descriptors`` (H, W, D), ``repeatability`` (H, W) and
+        ``reliability`` (H, W), float32 NumPy arrays.
+        """
+        out = self.net(self._input(burst))
+        return {
+            "descriptors": out["descriptors"][0].permute(1, 2, 0).float().cpu().numpy(),
+            "repeatability": out["repeatability"][0, 0].float().cpu().numpy(),
+            "reliability": out["reliability"][0, 0].float().cpu().numpy(),
+        }
+
+    @torch.inference_mode()
+    def extract(self, burst: np.ndarray, top_k: int | None = 4000, **options) -> Features:
+        """Multi-scale keypoints and descriptors of the burst's common frame.
+
+        ``options`` are fields of :class:`MultiScaleConfig`.  Returns, sorted by
+        decreasing score: ``keypoints`` (K, 2) float32 x, y (see the module
+        docstring for the convention), ``scales`` (K,) (32 / level scale, as
+        published), ``scores`` (K,) = reliability x repeatability, and
+        ``descriptors`` (K, 128) float32, L2-normalised.
+        """
+        cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
+        return self._extract(self._input(burst), cfg)
+
+    def _extract(self, x: torch.Tensor, cfg: MultiScaleConfig) -> Features:
+        height, width = x.shape[-2:]
+        long_side = max(height, width)
+        xs, ys, scales, scores, descs = [], [], [], [], []
+        s = 1.0
+        while s + 0.001 >= max(cfg.min_scale, cfg.min_size / long_side):
+            if s - 0.001 <= min(cfg.max_scale, cfg.max_size / long_side):
+                h, w = x.shape[-2:]
+                out = self.net(x)
+                rep, rel = out["repeatability"], out["reliability"]
+                y, xx = _local_maxima(rep, rel, cfg)
+                if cfg.published_coordinates:
+                    xs.append(xx.float() * width / w)
+                    ys.append(y.float() * height / h)
+                else:
+                    xs.append((xx.float() + 0.5) * (width / w) - 0.5)
+                    ys.append((y.float() + 0.5) * (height / h) - 0.5)
+                scales.append(torch.full((len(y),), 32 / s, device=x.device))
+                scores.append(rep[0, 0, y, xx] * rel[0, 0, y, xx])
+                descs.append(out["descriptors"][0, :, y, xx].t())
+            s /= cfg.scale_factor
+            size = (round(height * s), round(width * s))
+            x = F.interpolate(x, size, mode="bilinear", align_corners=False)
+        score = torch.cat(scores)
+        k = len(score) if cfg.top_k is None else min(cfg.top_k, len(score))
+        order = torch.topk(score, k, sorted=True).indices
+        return {
+            "keypoints": torch.stack([torch.cat(xs), torch.cat(ys)], -1)[order].float().cpu().numpy(),
+            "scales": torch.cat(scales)[order].float().cpu().numpy(),
+            "scores": score[order].float().cpu().numpy(),
+            "descriptors": torch.cat(descs)[order].float().cpu().numpy(),
+        }

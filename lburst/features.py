@@ -1,0 +1,56 @@
+"""The one output shape shared by every feature method.
+
+A *features* dict describes the keypoints of a burst's common (middle) frame:
+
+- ``keypoints`` (K, 2) float32: x, y in pixels of the common frame, pixel centres at
+  integer coordinates ((0, 0) is the centre of the top-left pixel; COLMAP wants +0.5);
+- ``scales`` (K,) float32: the keypoint's scale (detector-specific units, larger = coarser);
+- ``scores`` (K,) float32: detection confidence, larger is better;
+- ``descriptors`` (K, D): float32 (compared with L2) or uint8 packed bits (binary,
+  compared with Hamming distance, e.g. ORB);
+
+and optionally ``orientations`` (K,) float32 radians and ``slopes`` (K, 2) float32
+apparent motion in pixels per frame (BuFF).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+Features = dict[str, np.ndarray]
+
+REQUIRED = ("keypoints", "scales", "scores", "descriptors")
+
+
+def is_binary(features: Features) -> bool:
+    """True if the descriptors are packed bits, to be compared with Hamming distance."""
+    return features["descriptors"].dtype == np.uint8
+
+
+def check_features(features: Features) -> Features:
+    """Raise ``ValueError`` if ``features`` does not have the shape documented above."""
+    missing = [k for k in REQUIRED if k not in features]
+    if missing:
+        raise ValueError(f"features lack {missing}")
+    k = len(features["keypoints"])
+    if features["keypoints"].shape != (k, 2):
+        raise ValueError(f"keypoints must be (K, 2), got {features['keypoints'].shape}")
+    for key in ("scales", "scores", "orientations"):
+        if key in features and features[key].shape != (k,):
+            raise ValueError(f"{key} must be ({k},), got {features[key].shape}")
+    d = features["descriptors"]
+    if d.ndim != 2 or len(d) != k:
+        raise ValueError(f"descriptors must be (K, D) with K={k}, got {d.shape}")
+    if d.dtype not in (np.float32, np.uint8):
+        raise ValueError(f"descriptors must be float32 or uint8, got {d.dtype}")
+    return features
+
+
+def empty_features(dim: int = 128, binary: bool = False) -> Features:
+    """Features with no keypoints."""
+    return {
+        "keypoints": np.zeros((0, 2), np.float32),
+        "scales": np.zeros(0, np.float32),
+        "scores": np.zeros(0, np.float32),
+        "descriptors": np.zeros((0, dim), np.uint8 if binary else np.float32),
+    }

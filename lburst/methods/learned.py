@@ -1,0 +1,59 @@
+"""Learned extractors: LBurst networks (any number of frames) and single-image R2D2."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lburst.extract import LBurst
+from lburst.features import Features
+from lburst.methods import register
+
+
+class LearnedExtractor:
+    """Wraps :class:`lburst.LBurst` in the extractor interface."""
+
+    def __init__(self, model: LBurst, top_k: int = 4000, **options) -> None:
+        self.model = model
+        self.top_k = top_k
+        self.options = options
+        self.name = "lburst"
+
+    def __call__(self, burst: np.ndarray) -> Features:
+        return self.model.extract(burst, top_k=self.top_k, **self.options)
+
+
+def _bool(value: str | bool) -> bool:
+    if isinstance(value, bool):
+        return value
+    if value.lower() in ("1", "true", "yes"):
+        return True
+    if value.lower() in ("0", "false", "no"):
+        return False
+    raise ValueError(f"expected a boolean, got {value!r}")
+
+
+def _make(arg: str | None, default: str, device=None, frame_order: str = "temporal", top_k="4000", **options):
+    model = (
+        LBurst.from_checkpoint(arg, device=device, frame_order=frame_order)
+        if arg
+        else LBurst.pretrained(default, device=device)
+    )
+    conv = {"min_size": int, "max_size": int, "scale_factor": float, "rel_thr": float, "rep_thr": float,
+            "published_coordinates": _bool}
+    unknown = set(options) - set(conv)
+    if unknown:
+        raise ValueError(f"unknown options {sorted(unknown)} for a learned method; known: {sorted(conv)}")
+    top = None if str(top_k).lower() == "none" else int(top_k)
+    return LearnedExtractor(model, top, **{k: conv[k](v) for k, v in options.items()})
+
+
+@register("lburst")
+def lburst(arg: str | None = None, **options) -> LearnedExtractor:
+    """A burst network: the shipped ``lburst-b5`` or the checkpoint at ``arg``."""
+    return _make(arg, "lburst-b5", **options)
+
+
+@register("r2d2")
+def r2d2(arg: str | None = None, **options) -> LearnedExtractor:
+    """A single-image network on the common frame: the shipped ``lburst-b1`` or the checkpoint ``arg``."""
+    return _make(arg, "lburst-b1", **options)

@@ -1,0 +1,212 @@
+"""The LBurst network and its checkpoints.
+
+The network is R2D2's Fast-Quad-L2-Net with the "ConfCFS" heads, taking a burst of
+``N`` RGB frames concatenated on channels (``3N`` input channels; ``N = 1`` is the
+single-image R2D2 network).  For an input of ``H x W`` pixels it predicts, at the
+same resolution:
+
+- ``descriptors`` ``(B, 128, H, W)``: L2-normalised dense descriptors;
+- ``repeatability`` ``(B, 1, H, W)``: ``softplus(s) / (1 + softplus(s))`` with
+  ``s`` a 1x1 conv of the squared raw output;
+- ``reliability`` ``(B, 1, H, W)``: channel 1 of a 2-class softmax of a 1x1 conv of
+  the squared raw output.
+
+The module list reproduces the published state-dict layout (``ops.{i}.*`` by
+position), so the published LBurst (``RoBLo_N16_B*.pt``) and R2D2 checkpoints load
+strictly, and our own checkpoints are written in the same layout.
+
+Odd input sizes: the 2x2 max-pool and the x2 upsampling return a map one pixel
+smaller than the input along an odd dimension.  The published code keeps that
+smaller map; here the missing last row/column is filled explicitly (replicated
+descriptors, zero repeatability and reliability) so every output has the input's
+size and the last row/column can never hold a keypoint, as in the published code.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+
+#: Class name written into checkpoints, as in the published files.
+NET_NAME = "Fast_Quad_L2Net_ConfCFS"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file that cannot be read or does not describe an LBurst network."""
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """Architecture of a Fast-Quad-L2-Net.
+
+    Attributes:
+        frames: number of burst frames N (input channels = 3N).
+        dim: descriptor dimension.
+        mchan: channel multiplier (4 gives 32, 32, 64, 64, 128, 128 channels).
+    """
+
+    frames: int = 5
+    dim: int = 128
+    mchan: int = 4
+
+    @property
+    def in_channels(self) -> int:
+        return 3 * self.frames
+
+    def net_string(self) -> str:
+        """The checkpoint's ``net`` string, in the published files' spelling."""
+        if self.frames == 1:
+            return f"{NET_NAME}()"
+        return f"{NET_NAME}(inchan={self.in_channels})"
+
+
+class LBurstNet(nn.Module):
+    """Fast-Quad-L2-Net with reliability (``clf``) and repeatability (``sal``) heads."""
+
+    def __init__(self, config: NetConfig = NetConfig()) -> None:
+        super().__init__()
+        if config.frames < 1 or config.frames % 2 == 0:
+            raise ValueError(f"frames must be odd and positive, got {config.frames}")
+        self.config = config
+        m = config.mchan
+        ops: list[nn.Module] = []
+        channels = config.in_channels
+
+        def conv(out: int, k: int = 3, dilation: int = 1, bn: bool = True, relu: bool = True) -> None:
+            nonlocal channels
+            ops.append(nn.Conv2d(channels, out, k, padding=((k - 1) * dilation) // 2, dilation=dilation))
+            if bn:
+                ops.append(nn.BatchNorm2d(out, affine=False))
+            if relu:
+                ops.append(nn.ReLU(inplace=True))
+            channels = out
+
+        conv(8 * m)
+        conv(8 * m)
+        conv(16 * m)
+        ops.append(nn.MaxPool2d(2))
+        conv(16 * m)
+        conv(32 * m)  # stride 2 of the original net, turned into dilation of what follows
+        conv(32 * m, dilation=2)
+        # the 8x8 conv of L2-Net replaced by three dilated 2x2 convs
+        conv(32 * m, k=2, dilation=2, relu=False)
+        conv(32 * m, k=2, dilation=4, relu=False)
+        conv(config.dim, k=2, dilation=8, bn=False, relu=False)
+        self.ops = nn.ModuleList(ops)
+        self.clf = nn.Conv2d(config.dim, 2, kernel_size=1)
+        self.sal = nn.Conv2d(config.dim, 1, kernel_size=1)
+
+    def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Run the net on normalised bursts ``x`` of shape ``(B, 3N, H, W)``."""
+        if x.ndim != 4 or x.shape[1] != self.config.in_channels:
+            raise ValueError(
+                f"expected input (B, {self.config.in_channels}, H, W) for a {self.config.frames}-frame "
+                f"network, got {tuple(x.shape)}"
+            )
+        height, width = x.shape[-2:]
+        for op in self.ops:
+            x = op(x)
+        x = F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
+        squared = x * x
+        reliability = torch.softmax(self.clf(squared), dim=1)[:, 1:2]
+        s = F.softplus(self.sal(squared))
+        repeatability = s / (1 + s)
+        descriptors = F.normalize(x, p=2, dim=1)
+        pad_w, pad_h = width - x.shape[-1], height - x.shape[-2]
+        if pad_w or pad_h:  # odd input size: see the module docstring
+            descriptors = F.pad(descriptors, (0, pad_w, 0, pad_h), mode="replicate")
+            reliability = F.pad(reliability, (0, pad_w, 0, pad_h))
+            repeatability = F.pad(repeatability, (0, pad_w, 0, pad_h))
+        return {"descriptors": descriptors, "repeatability": repeatability, "reliability": reliability}
+
+
+def normalize_burst(burst: np.ndarray, device: torch.device | str = "cpu") -> torch.Tensor:
+    """Turn a burst ``(N, H, W, 3)`` uint8/uint16/float array into the net's input.
+
+    Each frame is scaled to ``[0, 1]`` (by 255 for uint8, 65535 for uint16, unchanged
+    for float), normalised with the ImageNet mean and std, and the frames are
+    concatenated on channels in the given order: output ``(1, 3N, H, W)`` float32.
+    """
+    if burst.ndim != 4 or burst.shape[-1] != 3:
+        raise ValueError(f"expected a burst of shape (N, H, W, 3), got {burst.shape}")
+    if burst.dtype == np.uint8:
+        scale = 1 / 255.0
+    elif burst.dtype == np.uint16:
+        scale = 1 / 65535.0
+    elif np.issubdtype(burst.dtype, np.floating):
+        scale = 1.0
+    else:
+        raise ValueError(f"unsupported burst dtype {burst.dtype}: use uint8, uint16 or float in [0, 1]")
+    x = torch.from_numpy(np.ascontiguousarray(burst)).to(device)
+    x = x.to(torch.float32) * scale  # (N, H, W, 3)
+    mean = torch.tensor(IMAGENET_MEAN, device=x.device)
+    std = torch.tensor(IMAGENET_STD, device=x.device)
+    x = (x - mean) / std
+    n, h, w, _ = x.shape
+    return x.permute(0, 3, 1, 2).reshape(1, 3 * n, h, w).contiguous()
+
+
+_INCHAN = re.compile(r"inchan\s*=\s*(\d+)")
+
+
+def config_from_net_string(net: str) -> NetConfig:
+    """Parse a checkpoint's ``net`` string (never evaluated) into a :class:`NetConfig`."""
+    if not isinstance(net, str) or not net.startswith(NET_NAME):
+        raise CheckpointError(f"unsupported network {net!r}: expected {NET_NAME}(...)")
+    match = _INCHAN.search(net)
+    inchan = int(match.group(1)) if match else 3
+    if inchan % 3:
+        raise CheckpointError(f"input channels {inchan} in {net!r} are not a multiple of 3")
+    return NetConfig(frames=inchan // 3)
+
+
+def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tuple[LBurstNet, dict]:
+    """Load a published or lburst checkpoint safely (``weights_only=True``).
+
+    Returns the network in eval mode on ``device`` and the checkpoint's other
+    entries (``net`` and, for our own files, ``meta``).
+    Raises :class:`CheckpointError` naming the file on any problem.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: checkpoint file not found")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # truncated zip, not a torch file, unsafe pickle...
+        raise CheckpointError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from exc
+    if not isinstance(ckpt, dict) or "state_dict" not in ckpt or "net" not in ckpt:
+        raise CheckpointError(f"{path}: expected a dict with 'net' and 'state_dict'")
+    try:
+        config = config_from_net_string(ckpt["net"])
+    except CheckpointError as exc:
+        raise CheckpointError(f"{path}: {exc}") from exc
+    state = {k.removeprefix("module."): v for k, v in ckpt["state_dict"].items()}
+    net = LBurstNet(config)
+    try:
+        net.load_state_dict(state, strict=True)
+    except RuntimeError as exc:
+        raise CheckpointError(f"{path}: weights do not fit {ckpt['net']}: {exc}") from exc
+    net.eval().to(device)
+    extra = {k: v for k, v in ckpt.items() if k != "state_dict"}
+    return net, extra
+
+
+def save_checkpoint(net: LBurstNet, path: str | Path, meta: dict | None = None) -> None:
+    """Write ``net`` in the published layout (``{'net', 'state_dict'}``) plus ``meta``, atomically."""
+    from lburst.io import atomic_path
+
+    state = {k: v.detach().cpu() for k, v in net.state_dict().items()}
+    ckpt = {"net": net.config.net_string(), "state_dict": state}
+    if meta:
+        ckpt["meta"] = meta
+    with atomic_path(path) as tmp:
+        torch.save(ckpt, tmp)

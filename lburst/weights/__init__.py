@@ -1,0 +1,21 @@
+"""Weights shipped with lburst, trained by this project's own code (see the model cards here)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+HERE = Path(__file__).parent
+NAMES = ("lburst-b5", "lburst-b1")
+
+
+def weights_path(name: str) -> Path:
+    """Path of the shipped checkpoint ``name`` (``'lburst-b5'`` or ``'lburst-b1'``)."""
+    if name not in NAMES:
+        raise ValueError(f"unknown weights {name!r}; shipped: {', '.join(NAMES)}")
+    path = HERE / f"{name}.pt"
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{name} weights are not shipped in this version yet ({path} missing): "
+            "pass a checkpoint with --weights PATH or set LBURST_WEIGHTS"
+        )
+    return path
