@@ -1,0 +1,120 @@
+"""Reference cameras of a scene's common frames (``SCENE/reference.json``).
+
+A scene folder holds one sub-folder per burst (``SCENE/<burst>/frame_000.png`` ...,
+in trajectory order) and optionally ``reference.json``::
+
+    {"source": "synthetic" | "sift-clean" | ...,
+     "camera": {"model": "PINHOLE", "width": W, "height": H, "params": [fx, fy, cx, cy]},
+     "images": {"<burst>": {"R": [[...], [...], [...]], "t": [tx, ty, tz]}, ...},
+     "length": trajectory length in world units (or null)}
+
+Conventions are COLMAP's own: ``R`` (3x3) and ``t`` (3,) map world to camera,
+``x_cam = R @ x_world + t``, the camera looks along +z with x right and y down, and a
+camera point projects to pixel ``(fx * x / z + cx, fy * y / z + cy)`` where the centre
+of the top-left pixel is ``(0.5, 0.5)`` (so a centred principal point is
+``cx = W / 2, cy = H / 2``).  Subtract 0.5 for lburst keypoints (``(0, 0)`` centre).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lburst.io import atomic_path
+
+
+
+@dataclass
+class Reference:
+    """Reference cameras of a scene.
+
+    Attributes:
+        source: where the poses come from (``'synthetic'`` is exact ground truth).
+        camera: COLMAP camera dict ``{"model": "PINHOLE", "width", "height", "params"}``.
+        poses: burst name -> ``(R (3, 3), t (3,))`` world-to-camera, float64.
+        length: trajectory length in world units, or ``None`` if unknown.
+    """
+
+    source: str
+    camera: dict
+    poses: dict[str, tuple[np.ndarray, np.ndarray]]
+    length: float | None = None
+
+    def centers(self) -> dict[str, np.ndarray]:
+        """Camera centre ``C = -R^T t`` (3,) in world coordinates of every image."""
+        return {name: -R.T @ t for name, (R, t) in self.poses.items()}
+
+    def intrinsics(self) -> np.ndarray:
+        """3x3 calibration matrix K (COLMAP pixel convention, see module docstring)."""
+        fx, fy, cx, cy = (float(v) for v in self.camera["params"][:4])
+        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+    def project(self, name: str, points: np.ndarray) -> np.ndarray:
+        """Pixels (N, 2) (COLMAP convention) of world points (N, 3) seen by image ``name``."""
+        R, t = self.poses[name]
+        cam = np.asarray(points, dtype=np.float64) @ R.T + t
+        uvw = cam @ self.intrinsics().T
+        return uvw[:, :2] / uvw[:, 2:3]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "source": self.source,
+            "camera": {
+                "model": str(self.camera["model"]),
+                "width": int(self.camera["width"]),
+                "height": int(self.camera["height"]),
+                "params": [float(v) for v in self.camera["params"]],
+            },
+            "images": {
+                name: {"R": np.asarray(R, dtype=float).tolist(), "t": np.asarray(t, dtype=float).tolist()}
+                for name, (R, t) in self.poses.items()
+            },
+            "length": None if self.length is None else float(self.length),
+        }
+
+    def save(self, path: str | Path) -> None:
+        """Write ``reference.json`` atomically."""
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(self.to_json(), indent=1))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Reference":
+        """Read ``reference.json``; a malformed file raises ``ValueError`` naming it."""
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{path}: not valid JSON ({err})") from err
+        try:
+            return cls._from_json(data)
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"{path}: malformed reference file: {err!r}") from err
+
+    @classmethod
+    def _from_json(cls, data: Any) -> "Reference":
+        if not isinstance(data, dict):
+            raise TypeError("top level must be a JSON object")
+        camera = data["camera"]
+        for key in ("model", "width", "height", "params"):
+            if key not in camera:
+                raise KeyError(f"camera.{key}")
+        if len(camera["params"]) < 4:
+            raise ValueError(f"camera.params needs at least 4 values, got {camera['params']}")
+        poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for name, pose in data["images"].items():
+            R = np.asarray(pose["R"], dtype=np.float64)
+            t = np.asarray(pose["t"], dtype=np.float64)
+            if R.shape != (3, 3) or t.shape != (3,):
+                raise ValueError(f"image {name!r}: R must be 3x3 and t length 3, got {R.shape} and {t.shape}")
+            poses[name] = (R, t)
+        length = data.get("length")
+        return cls(
+            source=str(data["source"]),
+            camera=dict(camera),
+            poses=poses,
+            length=None if length is None else float(length),
+        )
