@@ -1,0 +1,76 @@
+"""Training data: photo folders to an endless, seeded stream of burst pairs.
+
+Sample ``i`` is drawn with ``numpy.random.default_rng([seed, i])``, so the stream is
+the same on every run and a resumed run continues it exactly where it stopped.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from torch.utils.data import Dataset, Sampler
+
+from lburst.train.pairs import PairConfig, training_pair
+
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".ppm"}
+
+
+def list_photos(folders: list[str | Path]) -> list[Path]:
+    """All images under ``folders`` (recursively), sorted; error if there are none."""
+    photos: list[Path] = []
+    for folder in folders:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise FileNotFoundError(f"{folder}: training photo folder not found")
+        photos += sorted(p for p in folder.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not photos:
+        raise FileNotFoundError(f"no photos ({', '.join(sorted(IMAGE_SUFFIXES))}) under {', '.join(map(str, folders))}")
+    return photos
+
+
+class PairDataset(Dataset):
+    """Index ``i`` gives pair ``i`` of the stream as tensors:
+    ``burst_a``, ``burst_b`` (N, 3, crop, crop) float32 0..255, ``flow`` (crop, crop, 2), ``mask``."""
+
+    def __init__(self, photos: list[Path], cfg: PairConfig, seed: int = 0) -> None:
+        self.photos = photos
+        self.cfg = cfg
+        self.seed = seed
+
+    def __len__(self) -> int:
+        return 2**62
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        rng = np.random.default_rng([self.seed, index])
+        for _ in range(10):
+            path = self.photos[rng.integers(len(self.photos))]
+            photo = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            if photo is not None:
+                break
+        else:
+            raise OSError(f"could not read training photos (last tried {path})")
+        pair = training_pair(cv2.cvtColor(photo, cv2.COLOR_BGR2RGB), rng, self.cfg)
+        return {
+            "burst_a": torch.from_numpy(pair.burst_a).permute(0, 3, 1, 2),
+            "burst_b": torch.from_numpy(pair.burst_b).permute(0, 3, 1, 2),
+            "flow": torch.from_numpy(pair.flow),
+            "mask": torch.from_numpy(pair.mask),
+        }
+
+
+class StreamSampler(Sampler[int]):
+    """Indices ``start, start + stride, ...`` of the endless stream (``stride`` > 1 for
+    data-parallel ranks, each starting at its own offset)."""
+
+    def __init__(self, start: int, stride: int = 1) -> None:
+        self.start = start
+        self.stride = stride
+
+    def __iter__(self):
+        i = self.start
+        while True:
+            yield i
+            i += self.stride

@@ -1,0 +1,167 @@
+"""Self-supervised training pairs: two synthetic bursts of one photo and the flow between them.
+
+Coordinates: pixel centres at integer coordinates.  Both bursts are ``crop x crop``
+crops; ``G`` is the 3x3 homography mapping pixels of burst A's common frame to
+pixels of burst B's common frame.  Frame ``k`` (k = -N//2 .. N//2) of a burst shows
+the common frame's content displaced by ``k * motion`` (as in
+:func:`lburst.simulate.simulate_burst`).  Every frame is one ``cv2.warpPerspective``
+of the (rescaled) photo, so no frame is resampled twice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PairConfig:
+    """How training pairs are drawn.  Defaults follow the paper unless noted.
+
+    Attributes:
+        frames: frames per burst N (odd; 1 gives single-image pairs).
+        crop: side of the square crops, in pixels.
+        long_side: range of the photo's long side after random rescaling.
+        max_burst_motion: largest total in-burst translation (first to last frame), px.
+        max_rotation_deg, max_tilt, scale_range: the random homography between the
+            bursts (rotation about the crop centre, perspective tilt as a fraction of
+            the crop moving a corner pair, isotropic scale).
+        max_pair_shift: largest random translation between the bursts, px.
+        noise_variance: paper noise, variance on ImageNet-normalised values, drawn
+            uniformly per burst; ``None`` to use ``noise_std`` instead.
+        noise_std: Gaussian std range on the 0..255 scale, drawn per burst (lburst's
+            wider-range recipe, used when ``noise_variance`` is None).
+        dark_prob, dark_range: probability and range of a per-burst exposure factor
+            applied before the noise (darker images, same noise: lower SNR).
+        gamma_range: per-burst gamma jitter applied before the exposure factor.
+    """
+
+    frames: int = 5
+    crop: int = 192
+    long_side: tuple[int, int] = (256, 1024)
+    max_burst_motion: float = 30.0
+    max_rotation_deg: float = 15.0
+    max_tilt: float = 0.15
+    scale_range: tuple[float, float] = (0.8, 1.25)
+    max_pair_shift: float = 24.0
+    noise_variance: tuple[float, float] | None = (0.3, 0.6)
+    noise_std: tuple[float, float] = (5.0, 110.0)
+    dark_prob: float = 0.0
+    dark_range: tuple[float, float] = (0.15, 1.0)
+    gamma_range: tuple[float, float] = (1.0, 1.0)
+
+
+@dataclass
+class TrainingPair:
+    """``burst_a``, ``burst_b``: (N, crop, crop, 3) float32 on the 0..255 scale, noisy,
+    rounded and clipped; ``flow``: (crop, crop, 2) float32, the absolute position (x, y)
+    in B's common frame of every pixel of A's common frame; ``mask``: (crop, crop) bool,
+    where that position lies inside B; ``homography``: the 3x3 ``G`` (A to B)."""
+
+    burst_a: np.ndarray
+    burst_b: np.ndarray
+    flow: np.ndarray
+    mask: np.ndarray
+    homography: np.ndarray
+
+
+def _translation(tx: float, ty: float) -> np.ndarray:
+    return np.array([[1, 0, tx], [0, 1, ty], [0, 0, 1]], np.float64)
+
+
+def random_homography(rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
+    """A random homography of the crop (rotation, scale, tilt about its centre, then a shift)."""
+    c = (cfg.crop - 1) / 2
+    angle = np.deg2rad(rng.uniform(-cfg.max_rotation_deg, cfg.max_rotation_deg))
+    scale = np.exp(rng.uniform(*np.log(cfg.scale_range)))
+    rot = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    similarity = np.diag([scale, scale, 1.0]) @ rot
+    # tilt: move the four corners inwards/outwards by up to max_tilt * crop/2 along one random axis
+    half = cfg.crop / 2
+    src = np.array([[-half, -half], [half, -half], [half, half], [-half, half]], np.float32)
+    t = rng.uniform(-cfg.max_tilt, cfg.max_tilt) * half
+    dst = src.copy()
+    if rng.random() < 0.5:  # horizontal tilt: the left edge shrinks, the right one grows (or vice versa)
+        dst[[0, 3], 1] *= 1 - t / half
+        dst[[1, 2], 1] *= 1 + t / half
+    else:  # vertical tilt
+        dst[[0, 1], 0] *= 1 - t / half
+        dst[[2, 3], 0] *= 1 + t / half
+    tilt = cv2.getPerspectiveTransform(src, dst).astype(np.float64)
+    shift = rng.uniform(-cfg.max_pair_shift, cfg.max_pair_shift, 2)
+    g = _translation(c + shift[0], c + shift[1]) @ tilt @ similarity @ _translation(-c, -c)
+    return g / g[2, 2]
+
+
+def _burst_motion(rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
+    """Per-frame motion (dx, dy) with total length up to ``max_burst_motion`` over the burst."""
+    if cfg.frames == 1:
+        return np.zeros(2)
+    length = rng.uniform(0, cfg.max_burst_motion) / (cfg.frames - 1)
+    angle = rng.uniform(0, 2 * np.pi)
+    return length * np.array([np.cos(angle), np.sin(angle)])
+
+
+def _photometric(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
+    """Per-burst gamma and exposure, then per-frame Gaussian noise; round and clip."""
+    gamma = rng.uniform(*cfg.gamma_range)
+    if gamma != 1.0:
+        frames = 255.0 * (frames / 255.0) ** gamma
+    if rng.random() < cfg.dark_prob:
+        frames = frames * rng.uniform(*cfg.dark_range)
+    if cfg.noise_variance is not None:
+        variance = rng.uniform(*cfg.noise_variance)
+        std = np.sqrt(variance) * np.array([0.229, 0.224, 0.225]) * 255.0
+    else:
+        std = np.full(3, rng.uniform(*cfg.noise_std))
+    noisy = frames + rng.standard_normal(frames.shape, dtype=np.float32) * std.astype(np.float32)
+    return np.clip(np.round(noisy), 0, 255).astype(np.float32)
+
+
+def _rescale(photo: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
+    h, w = photo.shape[:2]
+    lo, hi = cfg.long_side
+    # the rescaled photo must hold a crop with margin for the in-burst motion
+    lo = max(lo, int(np.ceil((cfg.crop + 2 * cfg.max_burst_motion) * max(h, w) / min(h, w))))
+    target = rng.uniform(lo, max(lo, hi))
+    s = target / max(h, w)
+    size = (max(1, round(w * s)), max(1, round(h * s)))
+    interp = cv2.INTER_AREA if s < 1 else cv2.INTER_LINEAR
+    return cv2.resize(photo, size, interpolation=interp)
+
+
+def _render(photo: np.ndarray, to_photo: np.ndarray, crop: int, motion: np.ndarray, frames: int) -> np.ndarray:
+    """Frames whose common frame maps pixel p to photo pixel ``to_photo @ p``."""
+    out = np.empty((frames, crop, crop, 3), np.float32)
+    for i, k in enumerate(range(-(frames // 2), frames // 2 + 1)):
+        m = to_photo @ _translation(-k * motion[0], -k * motion[1])
+        out[i] = cv2.warpPerspective(
+            photo, m, (crop, crop), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REFLECT_101
+        )
+    return out
+
+
+def training_pair(photo: np.ndarray, rng: np.random.Generator, cfg: PairConfig = PairConfig()) -> TrainingPair:
+    """Draw one training pair from ``photo`` (H, W, 3) uint8 RGB."""
+    if photo.ndim != 3 or photo.shape[2] != 3:
+        raise ValueError(f"expected an RGB photo (H, W, 3), got {photo.shape}")
+    photo = _rescale(photo, rng, cfg).astype(np.float32)
+    h, w = photo.shape[:2]
+    crop = cfg.crop
+    margin = cfg.max_burst_motion
+    ox = rng.uniform(margin, max(margin, w - crop - margin))
+    oy = rng.uniform(margin, max(margin, h - crop - margin))
+    a_to_photo = _translation(ox, oy)
+    g = random_homography(rng, cfg)
+    b_to_photo = a_to_photo @ np.linalg.inv(g)
+    burst_a = _render(photo, a_to_photo, crop, _burst_motion(rng, cfg), cfg.frames)
+    burst_b = _render(photo, b_to_photo, crop, _burst_motion(rng, cfg), cfg.frames)
+    burst_a = _photometric(burst_a, rng, cfg)
+    burst_b = _photometric(burst_b, rng, cfg)
+    ys, xs = np.mgrid[0:crop, 0:crop].astype(np.float64)
+    pts = np.stack([xs, ys, np.ones_like(xs)], -1) @ g.T
+    flow = (pts[..., :2] / pts[..., 2:]).astype(np.float32)
+    mask = (flow[..., 0] >= 0) & (flow[..., 0] <= crop - 1) & (flow[..., 1] >= 0) & (flow[..., 1] <= crop - 1)
+    return TrainingPair(burst_a, burst_b, flow, mask, g)

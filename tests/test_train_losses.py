@@ -1,0 +1,100 @@
+"""The training losses: minimal for perfect predictions, gradients flow, AP is exact."""
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from lburst.train.losses import APSampling, cosim_loss, peaky_loss, quantized_ap, reliability_ap_loss, warp_to_a
+
+
+def _shift_flow(h, w, dx, dy, b=1):
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij")
+    flow = torch.stack([xs + dx, ys + dy], -1)[None].repeat(b, 1, 1, 1)
+    mask = (flow[..., 0] >= 0) & (flow[..., 0] <= w - 1) & (flow[..., 1] >= 0) & (flow[..., 1] <= h - 1)
+    return flow, mask
+
+
+def brute_force_ap(scores, labels):
+    order = np.argsort(-scores, kind="stable")
+    hits = labels[order]
+    precision_at_hits = np.cumsum(hits)[hits] / (np.flatnonzero(hits) + 1)
+    return precision_at_hits.mean()
+
+
+def test_warp_to_a_follows_the_flow():
+    b = torch.rand(1, 1, 20, 30)
+    flow, _ = _shift_flow(20, 30, 3, 2)
+    warped = warp_to_a(b, flow)
+    assert torch.allclose(warped[0, 0, :18, :27], b[0, 0, 2:, 3:], atol=1e-5)
+
+
+def test_quantized_ap_matches_brute_force_on_bin_centres():
+    rng = np.random.default_rng(0)
+    centres = np.linspace(1, 0, 20)
+    for _ in range(20):
+        picks = rng.choice(20, size=12, replace=False)  # distinct bins: no ties
+        scores = centres[picks]
+        labels = rng.random(12) < 0.4
+        labels[0] = True
+        ap = quantized_ap(torch.tensor(scores[None], dtype=torch.float64), torch.tensor(labels[None]))
+        assert ap.item() == pytest.approx(brute_force_ap(scores, labels), abs=1e-9)
+
+
+def test_quantized_ap_ignores_entries_not_kept():
+    scores = torch.tensor([[0.5, 1.0, 0.0]])
+    labels = torch.tensor([[True, False, False]])
+    assert quantized_ap(scores, labels, bins=3).item() == pytest.approx(0.5)
+    keep = torch.tensor([[True, False, True]])
+    assert quantized_ap(scores, labels, bins=3, keep=keep).item() == pytest.approx(1.0)
+
+
+def test_cosim_loss_is_zero_for_consistent_maps_and_positive_otherwise():
+    torch.manual_seed(0)
+    h, w, dx, dy = 48, 64, 5, 3
+    big = torch.rand(1, 1, h + dy, w + dx)
+    rep_a = big[..., :h, :w]
+    rep_b = torch.zeros(1, 1, h, w)
+    rep_b[..., : h - dy, : w - dx] = big[..., dy:h, dx:w]  # B sees A's content shifted by (-dx, -dy)
+    # content at A (x, y) is big[y, x] = B (x - dx, y - dy)
+    flow, mask = _shift_flow(h, w, -dx, -dy)
+    assert cosim_loss(rep_a, rep_b, flow, mask).item() == pytest.approx(0, abs=1e-5)
+    assert cosim_loss(rep_a, torch.rand(1, 1, h, w), flow, mask).item() > 0.05
+
+
+def test_peaky_loss_prefers_peaks():
+    flat = torch.full((1, 1, 64, 64), 0.5)
+    peaks = torch.zeros(1, 1, 64, 64)
+    peaks[..., 8::17, 8::17] = 1.0
+    assert peaky_loss(peaks).item() < peaky_loss(flat).item()
+    assert peaky_loss(flat).item() == pytest.approx(1.0)
+
+
+def test_reliability_loss_rewards_matching_descriptors_and_gradients_flow():
+    torch.manual_seed(0)
+    h, w, dx, dy = 64, 64, 4, -3
+    big = F.normalize(torch.randn(1, 16, h + 10, w + 10), dim=1)
+    desc_a = big[..., 5 : 5 + h, 5 : 5 + w]
+    desc_b = big[..., 5 - dy : 5 - dy + h, 5 - dx : 5 - dx + w]  # A(x, y) = B(x + dx, y + dy)
+    flow, mask = _shift_flow(h, w, dx, dy)
+    rel = torch.full((1, 1, h, w), 0.9, requires_grad=True)
+    gen = torch.Generator().manual_seed(0)
+    loss_good, ap_good = reliability_ap_loss(desc_a, desc_b, rel, flow, mask, gen)
+    assert ap_good.item() > 0.95
+    loss_good.backward()
+    assert rel.grad is not None and rel.grad.abs().sum() > 0
+    rand_b = F.normalize(torch.randn(1, 16, h, w), dim=1)
+    loss_bad, ap_bad = reliability_ap_loss(desc_a, rand_b, rel, flow, mask, gen)
+    assert ap_bad.item() < 0.5 and loss_bad.item() > loss_good.item()
+
+
+def test_descriptor_gradients_flow_through_the_ap_loss():
+    torch.manual_seed(1)
+    h = w = 48
+    desc_a = torch.randn(1, 8, h, w, requires_grad=True)
+    desc_b = torch.randn(1, 8, h, w, requires_grad=True)
+    flow, mask = _shift_flow(h, w, 0, 0)
+    loss, _ = reliability_ap_loss(F.normalize(desc_a, dim=1), F.normalize(desc_b, dim=1),
+                                  torch.full((1, 1, h, w), 0.5), flow, mask, None, APSampling(border=8))
+    loss.backward()
+    assert desc_a.grad.abs().sum() > 0 and desc_b.grad.abs().sum() > 0
