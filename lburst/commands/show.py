@@ -1,0 +1,48 @@
+"""``lburst show``: a PNG of a burst's keypoints and its repeatability and reliability maps."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from lburst.commands.extract import burst_name
+from lburst.extract import LBurst
+from lburst.io import BurstError, load_burst
+from lburst.model import CheckpointError
+from lburst.viz import plot_keypoints_and_maps
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    p.add_argument("burst", type=Path, help="burst folder, image or video")
+    p.add_argument("--weights", help="checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
+    p.add_argument("--frame-order", choices=["temporal", "published"], default="temporal")
+    p.add_argument("--top-k", type=int, default=4000)
+    p.add_argument("--out", type=Path, help="PNG path (default: <burst>_keypoints.png here)")
+    p.add_argument("--device")
+
+
+def load_model(weights: str | None, frame_order: str = "temporal", device: str | None = None) -> LBurst:
+    """``weights``, else ``$LBURST_WEIGHTS``, else the shipped ``lburst-b5``."""
+    import os
+
+    weights = weights or os.environ.get("LBURST_WEIGHTS")
+    if weights:
+        return LBurst.from_checkpoint(weights, device=device, frame_order=frame_order)
+    return LBurst.pretrained("lburst-b5", device=device)
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        model = load_model(args.weights, args.frame_order, args.device)
+        burst = load_burst(args.burst)
+    except (CheckpointError, BurstError, FileNotFoundError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    features = model.extract(burst, top_k=args.top_k)
+    dense = model.dense(burst)
+    out = args.out or Path(f"{burst_name(args.burst)}_keypoints.png")
+    plot_keypoints_and_maps(burst[len(burst) // 2], features["keypoints"], dense["repeatability"],
+                            dense["reliability"], out, title=f"{args.burst}")
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,61 @@
+"""Pictures: keypoints on the common frame and the network's confidence maps."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from lburst.io import atomic_path  # noqa: E402
+
+
+def to_display(image: np.ndarray) -> np.ndarray:
+    """An (H, W, 3) uint8 or uint16 image as uint8 for display."""
+    if image.dtype == np.uint16:
+        return (image / 257).astype(np.uint8)
+    return image
+
+
+def plot_keypoints_and_maps(
+    image: np.ndarray,
+    keypoints: np.ndarray,
+    repeatability: np.ndarray | None,
+    reliability: np.ndarray | None,
+    path: str | Path,
+    title: str = "",
+    max_keypoints: int = 2000,
+) -> Path:
+    """Save a PNG: ``image`` (H, W, 3) with ``keypoints`` (K, 2) (x, y, pixel centres at
+    integer coordinates), and the repeatability and reliability maps (H, W) in red (low)
+    to green (high), side by side as in the paper's figures."""
+    panels = [("keypoints", None)]
+    if repeatability is not None:
+        panels.append(("repeatability", repeatability))
+    if reliability is not None:
+        panels.append(("reliability", reliability))
+    h, w = image.shape[:2]
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels) * w / max(h, w) + 0.5, 5 * h / max(h, w) + 0.6))
+    axes = np.atleast_1d(axes)
+    for ax, (name, data) in zip(axes, panels):
+        if data is None:
+            ax.imshow(to_display(image))
+            kp = keypoints[:max_keypoints]
+            ax.scatter(kp[:, 0], kp[:, 1], s=4, c="lime", edgecolors="none")
+            ax.set_title(f"{len(keypoints)} keypoints" + (f" (best {len(kp)} shown)" if len(kp) < len(keypoints) else ""))
+        else:
+            im = ax.imshow(data, cmap="RdYlGn", vmin=0, vmax=1)
+            ax.set_title(name)
+            fig.colorbar(im, ax=ax, fraction=0.035, pad=0.02)
+        ax.set_axis_off()
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
+    plt.close(fig)
+    return path
