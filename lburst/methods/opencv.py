@@ -1,0 +1,87 @@
+"""SIFT and ORB (OpenCV) on the grayscale common frame of a burst.
+
+Registered as ``sift`` (options ``max_features`` = 5000, ``root`` = false: RootSIFT,
+``contrast_threshold`` = 0.04) and ``orb`` (``max_features`` = 5000).  uint16 bursts are
+scaled to 8 bit first.  Keypoints use OpenCV's convention, which is lburst's (pixel
+centres at integer coordinates).  ``scales`` is OpenCV's keypoint ``size`` (the
+diameter of the described region), ``scores`` its ``response`` and ``orientations``
+its ``angle`` in radians.  SIFT descriptors are float32 (L2); ORB's stay packed uint8
+(32 bytes, Hamming).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from lburst.features import Features, empty_features
+from lburst.methods import register
+from lburst.methods.frames import check_burst, to_gray8
+from lburst.methods.options import as_bool, check_known
+
+
+def keypoints_to_features(keypoints: tuple[cv2.KeyPoint, ...], descriptors: np.ndarray | None, dim: int,
+                          binary: bool) -> Features:
+    """Convert OpenCV keypoints and descriptors to a features dict (with ``orientations``)."""
+    if not keypoints or descriptors is None:
+        features = empty_features(dim, binary)
+        features["orientations"] = np.zeros(0, np.float32)
+        return features
+    return {
+        "keypoints": np.array([kp.pt for kp in keypoints], np.float32).reshape(-1, 2),
+        "scales": np.array([kp.size for kp in keypoints], np.float32),
+        "scores": np.array([kp.response for kp in keypoints], np.float32),
+        "orientations": np.deg2rad(np.array([kp.angle for kp in keypoints], np.float32)),
+        "descriptors": descriptors.astype(np.uint8 if binary else np.float32),
+    }
+
+
+def root_sift(descriptors: np.ndarray, eps: float = 1e-7) -> np.ndarray:
+    """RootSIFT (Arandjelovic & Zisserman 2012): L1-normalise, then element-wise square root.
+
+    The result has unit L2 norm, so L2 distances between RootSIFT vectors compare
+    the original descriptors by the Hellinger kernel.
+    """
+    d = descriptors.astype(np.float32)
+    d /= np.abs(d).sum(axis=1, keepdims=True) + eps
+    return np.sqrt(d)
+
+
+class OpenCVExtractor:
+    """An OpenCV ``Feature2D`` detector/descriptor run on the burst's common frame."""
+
+    def __init__(self, detector: cv2.Feature2D, dim: int, binary: bool, root: bool = False) -> None:
+        self.detector = detector
+        self.dim = dim
+        self.binary = binary
+        self.root = root
+        self.name = "opencv"
+
+    def __call__(self, burst: np.ndarray) -> Features:
+        burst = check_burst(burst)
+        image = to_gray8(burst[len(burst) // 2])
+        keypoints, descriptors = self.detector.detectAndCompute(image, None)
+        features = keypoints_to_features(keypoints, descriptors, self.dim, self.binary)
+        if self.root and len(features["descriptors"]):
+            features["descriptors"] = root_sift(features["descriptors"])
+        return features
+
+
+@register("sift")
+def sift(arg: str | None = None, max_features: str = "5000", root: str = "false",
+         contrast_threshold: str = "0.04", **options: str) -> OpenCVExtractor:
+    """SIFT with OpenCV's defaults; ``root=true`` gives RootSIFT descriptors."""
+    check_known(options, set(), "sift")
+    if arg:
+        raise ValueError(f"sift takes no argument, got {arg!r}")
+    detector = cv2.SIFT_create(nfeatures=int(max_features), contrastThreshold=float(contrast_threshold))
+    return OpenCVExtractor(detector, 128, binary=False, root=as_bool(root))
+
+
+@register("orb")
+def orb(arg: str | None = None, max_features: str = "5000", **options: str) -> OpenCVExtractor:
+    """ORB with OpenCV's defaults; descriptors are 32 packed bytes."""
+    check_known(options, set(), "orb")
+    if arg:
+        raise ValueError(f"orb takes no argument, got {arg!r}")
+    return OpenCVExtractor(cv2.ORB_create(nfeatures=int(max_features)), 32, binary=True)
