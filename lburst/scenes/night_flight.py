@@ -1,0 +1,272 @@
+"""The synthetic night flight: a drone flies over a toy city and takes a burst of frames
+at regular spacing, with exact ground-truth cameras.
+
+Trajectory: at time ``s`` (seconds) the drone is at altitude ``altitude`` and has flown
+``speed * s`` metres along a path that starts at the origin heading ``heading_deg``
+(counter-clockwise from +x) and turns steadily by ``turn_deg`` over the flight.  The
+camera looks forward and down, ``pitch_deg`` from nadir, with a small deterministic
+attitude wobble (``shake_deg``).  Burst ``i`` is centred at time
+``i * burst_spacing / speed``; its frame ``k`` (0-based, of ``frames_per_burst``) is
+rendered from the pose at ``(k - mid) * frame_interval`` seconds later, so the frames of
+a burst see the scene with real parallax, and the middle frame is the common frame whose
+pose goes into ``reference.json`` (see :mod:`lburst.scenes.reference` for conventions).
+
+Scene folder written by :func:`make_night_flight`::
+
+    OUT/night_flight.json        the configuration (a re-run with another one is refused)
+    OUT/0000/frame_000.png ...   uint8 RGB frames of each burst, temporal order
+    OUT/reference.json           exact poses of the common frames
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from lburst.io import atomic_path
+from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
+from lburst.scenes.raycast import cast, intrinsics, pixel_rays
+from lburst.scenes.reference import Reference
+
+CONFIG_FILE = "night_flight.json"
+Noise = Callable[[np.ndarray, np.random.Generator], np.ndarray]
+
+
+@dataclass(frozen=True)
+class NightFlightConfig:
+    """The flight, the camera, the noise and the city.  Lengths in metres, times in seconds.
+
+    Attributes:
+        n_bursts, frames_per_burst: number of bursts and frames per burst (odd).
+        width, height, hfov_deg: image size and horizontal field of view.
+        altitude, speed, heading_deg, turn_deg: flight (see module docstring).
+        pitch_deg: camera tilt from nadir, forward.
+        frame_interval: time between frames of a burst (speed * interval = motion per frame).
+        burst_spacing: distance flown between consecutive common frames.
+        shake_deg: amplitude of the attitude wobble.
+        supersample: render at this many times the resolution and area-average (anti-aliasing).
+        noise: noise spec for :func:`lburst.noise.noise_from_spec` (``'none'``: clean).
+        seed: seed of the city and of the noise.
+        city: how the city looks (:data:`lburst.scenes.city.DAYLIGHT` for a day flight).
+    """
+
+    n_bursts: int = 15
+    frames_per_burst: int = 5
+    width: int = 640
+    height: int = 480
+    hfov_deg: float = 60.0
+    altitude: float = 40.0
+    speed: float = 5.0
+    heading_deg: float = 0.0
+    turn_deg: float = 30.0
+    pitch_deg: float = 35.0
+    frame_interval: float = 0.05
+    burst_spacing: float = 6.0
+    shake_deg: float = 0.3
+    supersample: int = 1
+    noise: str = "none"
+    seed: int = 0
+    city: CityConfig = field(default_factory=CityConfig)
+
+    def __post_init__(self) -> None:
+        if self.frames_per_burst < 1 or self.frames_per_burst % 2 == 0:
+            raise ValueError(f"frames_per_burst must be odd, got {self.frames_per_burst}")
+        if self.n_bursts < 1 or self.width < 8 or self.height < 8 or self.supersample < 1:
+            raise ValueError("n_bursts >= 1, image size >= 8 and supersample >= 1 are required")
+        if self.pitch_deg + self.vfov_deg / 2 >= 85:
+            raise ValueError(f"pitch {self.pitch_deg} deg sees the horizon; lower it below {85 - self.vfov_deg / 2:.0f}")
+        if self.city.max_height >= self.altitude - 2:
+            raise ValueError("buildings must stay below the flight altitude")
+
+    @property
+    def vfov_deg(self) -> float:
+        return float(np.degrees(2 * np.arctan(np.tan(np.radians(self.hfov_deg) / 2) * self.height / self.width)))
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "NightFlightConfig":
+        data = dict(data)
+        data["city"] = CityConfig(**data.get("city", {}))
+        return cls(**data)
+
+    @classmethod
+    def daylight(cls, **kwargs: Any) -> "NightFlightConfig":
+        """The same flight in daylight (no lamps, no lit windows)."""
+        city = kwargs.pop("city", CityConfig())
+        return cls(city=dataclasses.replace(city, **DAYLIGHT), **kwargs)
+
+
+def burst_name(i: int) -> str:
+    return f"{i:04d}"
+
+
+def frame_time(cfg: NightFlightConfig, burst: int, frame: int) -> float:
+    """Time (s) of ``frame`` of ``burst``; the middle frame is at ``burst * spacing / speed``."""
+    return burst * cfg.burst_spacing / cfg.speed + (frame - cfg.frames_per_burst // 2) * cfg.frame_interval
+
+
+def camera_pose(cfg: NightFlightConfig, time: float) -> tuple[np.ndarray, np.ndarray]:
+    """World-to-camera ``(R (3, 3), t (3,))`` of the drone's camera at ``time``."""
+    s = cfg.speed * time
+    total = max((cfg.n_bursts - 1) * cfg.burst_spacing, 1e-9)
+    kappa = np.radians(cfg.turn_deg) / total  # heading change per metre
+    psi0 = np.radians(cfg.heading_deg)
+    psi = psi0 + kappa * s
+    if abs(kappa) < 1e-12:
+        xy = s * np.array([np.cos(psi0), np.sin(psi0)])
+    else:
+        xy = np.array([np.sin(psi) - np.sin(psi0), np.cos(psi0) - np.cos(psi)]) / kappa
+    centre = np.array([xy[0], xy[1], cfg.altitude])
+    heading = np.array([np.cos(psi), np.sin(psi), 0.0])
+    theta = np.radians(cfg.pitch_deg)
+    z_axis = np.sin(theta) * heading + np.array([0.0, 0.0, -np.cos(theta)])
+    x_axis = np.array([heading[1], -heading[0], 0.0])
+    y_axis = np.cross(z_axis, x_axis)
+    base = np.stack([x_axis, y_axis, z_axis])
+    wobble = np.radians(cfg.shake_deg) * np.sin(2 * np.pi * np.array([1.3, 0.9, 0.7]) * time + np.array([0.4, 1.7, 2.9]))
+    R = Rotation.from_rotvec(wobble).as_matrix() @ base
+    return R, -R @ centre
+
+
+def burst_poses(cfg: NightFlightConfig, burst: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Poses of the frames of ``burst`` in temporal order."""
+    return [camera_pose(cfg, frame_time(cfg, burst, k)) for k in range(cfg.frames_per_burst)]
+
+
+def reference(cfg: NightFlightConfig) -> Reference:
+    """Exact cameras of the common frames; ``length`` is the polyline length of their centres."""
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    mid = cfg.frames_per_burst // 2
+    poses = {burst_name(i): camera_pose(cfg, frame_time(cfg, i, mid)) for i in range(cfg.n_bursts)}
+    centres = np.array([-R.T @ t for R, t in poses.values()])
+    length = float(np.linalg.norm(np.diff(centres, axis=0), axis=1).sum())
+    camera = {"model": "PINHOLE", "width": cfg.width, "height": cfg.height, "params": [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]}
+    return Reference(source="synthetic", camera=camera, poses=poses, length=length)
+
+
+def ground_bounds(cfg: NightFlightConfig, margin: float = 10.0) -> np.ndarray:
+    """(2, 2) ``[[x0, y0], [x1, y1]]`` covering the ground seen by every frame."""
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    pts = []
+    for i in range(cfg.n_bursts):
+        for k in (0, cfg.frames_per_burst - 1):
+            R, t = camera_pose(cfg, frame_time(cfg, i, k))
+            rays = pixel_rays(K, R, cfg.width, cfg.height)
+            border = np.concatenate([rays[0], rays[-1], rays[:, 0], rays[:, -1]])
+            dz = np.minimum(border[:, 2], -1e-3)
+            dist = np.minimum(-cfg.altitude / dz, 8 * cfg.altitude)
+            pts.append((-R.T @ t)[:2] + dist[:, None] * border[:, :2])
+    pts = np.concatenate(pts)
+    return np.stack([pts.min(0) - margin, pts.max(0) + margin])
+
+
+def make_city(cfg: NightFlightConfig) -> City:
+    """The flight's city: random from ``cfg.seed``, styled by ``cfg.city``, covering the ground in view."""
+    return build_city(ground_bounds(cfg), cfg.city, np.random.default_rng([cfg.seed, 0]))
+
+
+def render_view(city: City, K: np.ndarray, R: np.ndarray, t: np.ndarray, width: int, height: int, supersample: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Noise-free image (H, W, 3) float32 0..255 and z-depth (H, W) (``inf``: sky) of a camera."""
+    s = supersample
+    Ks = np.diag([s, s, 1.0]) @ K
+    hits = cast(Ks, R, t, width * s, height * s, city.lo, city.hi)
+    image = shade(city, hits, Ks[0, 0])
+    depth = hits.t * (hits.dirs @ R[2])
+    if s > 1:
+        image = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
+        depth = depth[s // 2 :: s, s // 2 :: s]  # nearest sample (exact at odd s)
+    return image, depth
+
+
+def _noise(spec: str) -> Noise | None:
+    if spec in ("", "none"):
+        return None
+    from lburst.noise import noise_from_spec
+
+    return noise_from_spec(spec)
+
+
+def render_burst(cfg: NightFlightConfig, burst: int, city: City | None = None, noisy: bool = True) -> np.ndarray:
+    """Frames (F, H, W, 3) uint8 of ``burst``; noise from ``cfg.noise`` (seeded by the
+    config's seed, the burst and the frame) unless ``noisy`` is false."""
+    city = make_city(cfg) if city is None else city
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    noise = _noise(cfg.noise) if noisy else None
+    frames = []
+    for k, (R, t) in enumerate(burst_poses(cfg, burst)):
+        image, _ = render_view(city, K, R, t, cfg.width, cfg.height, cfg.supersample)
+        if noise is not None:
+            image = noise(image, np.random.default_rng([cfg.seed, 1, burst, k]))
+        frames.append(np.clip(np.round(image), 0, 255).astype(np.uint8))
+    return np.stack(frames)
+
+
+def clean_common_frames(cfg: NightFlightConfig, city: City | None = None) -> dict[str, np.ndarray]:
+    """Noise-free common (middle) frames, burst name -> (H, W, 3) uint8."""
+    city = make_city(cfg) if city is None else city
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    out = {}
+    for name, (R, t) in reference(cfg).poses.items():
+        image, _ = render_view(city, K, R, t, cfg.width, cfg.height, cfg.supersample)
+        out[name] = np.clip(np.round(image), 0, 255).astype(np.uint8)
+    return out
+
+
+def _write_burst(directory: Path, frames: np.ndarray) -> None:
+    """Write the frames into a temporary folder, then rename it onto ``directory``."""
+    tmp = Path(tempfile.mkdtemp(dir=directory.parent, prefix=f".{directory.name}.", suffix=".tmp"))
+    try:
+        for k, frame in enumerate(frames):
+            if not cv2.imwrite(str(tmp / f"frame_{k:03d}.png"), frame[..., ::-1]):
+                raise OSError(f"could not write {tmp / f'frame_{k:03d}.png'}")
+        os.replace(tmp, directory)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+
+
+def make_night_flight(out_dir: str | Path, cfg: NightFlightConfig = NightFlightConfig(), progress: bool = True) -> Reference:
+    """Render the flight into the scene folder ``out_dir`` and return its reference.
+
+    Bursts already in ``out_dir`` are kept (resume); a folder made with another
+    configuration is refused with ``ValueError``.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    config_path = out / CONFIG_FILE
+    if config_path.exists():
+        try:
+            old = json.loads(config_path.read_text())
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{config_path}: not valid JSON ({err})") from err
+        if old != json.loads(json.dumps(cfg.to_dict())):
+            raise ValueError(f"{config_path}: {out} was made with another configuration; use a new folder")
+    else:
+        with atomic_path(config_path) as tmp:
+            tmp.write_text(json.dumps(cfg.to_dict(), indent=1))
+    todo = [i for i in range(cfg.n_bursts) if not (out / burst_name(i)).is_dir()]
+    if todo:
+        city = make_city(cfg)
+        bar = range(len(todo))
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(bar, desc="night flight", unit="burst")
+        for j in bar:
+            i = todo[j]
+            _write_burst(out / burst_name(i), render_burst(cfg, i, city))
+    ref = reference(cfg)
+    ref.save(out / "reference.json")
+    return ref
