@@ -18,6 +18,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from lburst.fast import FastLBurstNet, descriptors_at
 from lburst.features import Features
 from lburst.model import LBurstNet, load_checkpoint, normalize_burst
 
@@ -35,6 +36,8 @@ class MultiScaleConfig:
         top_k: keep the best ``top_k`` keypoints by score (``None``: all).
         published_coordinates: map level coordinates as the published code does
             (``x * W / w``) instead of the pixel-centre-correct mapping.
+        fast: use :class:`lburst.fast.FastLBurstNet` (same features, less work);
+            ``False`` runs the plain network as the published code does.
     """
 
     min_size: int = 256
@@ -46,6 +49,7 @@ class MultiScaleConfig:
     rep_thr: float = 0.7
     top_k: int | None = 4000
     published_coordinates: bool = False
+    fast: bool = True
 
 
 def frame_permutation(n: int, order: str) -> list[int]:
@@ -88,6 +92,14 @@ class LBurst:
         self.frames = net.config.frames
         self.frame_order = frame_order
         self._perm = frame_permutation(self.frames, frame_order)
+        self._fast: FastLBurstNet | None = None
+
+    @property
+    def fast_net(self) -> FastLBurstNet:
+        """The inference-only form of the network (built on first use)."""
+        if self._fast is None:
+            self._fast = FastLBurstNet(self.net).to(self.device).eval()
+        return self._fast
 
     @classmethod
     def from_checkpoint(
@@ -154,9 +166,15 @@ class LBurst:
         while s + 0.001 >= max(cfg.min_scale, cfg.min_size / long_side):
             if s - 0.001 <= min(cfg.max_scale, cfg.max_size / long_side):
                 h, w = x.shape[-2:]
-                out = self.net(x)
-                rep, rel = out["repeatability"], out["reliability"]
-                y, xx = _local_maxima(rep, rel, cfg)
+                if cfg.fast:
+                    rep, rel, half = self.fast_net(x)
+                    y, xx = _local_maxima(rep, rel, cfg)
+                    descs.append(descriptors_at(half, y, xx))
+                else:
+                    out = self.net(x)
+                    rep, rel = out["repeatability"], out["reliability"]
+                    y, xx = _local_maxima(rep, rel, cfg)
+                    descs.append(out["descriptors"][0, :, y, xx].t())
                 if cfg.published_coordinates:
                     xs.append(xx.float() * width / w)
                     ys.append(y.float() * height / h)
@@ -165,10 +183,10 @@ class LBurst:
                     ys.append((y.float() + 0.5) * (height / h) - 0.5)
                 scales.append(torch.full((len(y),), 32 / s, device=x.device))
                 scores.append(rep[0, 0, y, xx] * rel[0, 0, y, xx])
-                descs.append(out["descriptors"][0, :, y, xx].t())
             s /= cfg.scale_factor
-            size = (round(height * s), round(width * s))
-            x = F.interpolate(x, size, mode="bilinear", align_corners=False)
+            if s + 0.001 >= max(cfg.min_scale, cfg.min_size / long_side):  # a next level: resize the last one
+                size = (round(height * s), round(width * s))
+                x = F.interpolate(x, size, mode="bilinear", align_corners=False)
         score = torch.cat(scores)
         k = len(score) if cfg.top_k is None else min(cfg.top_k, len(score))
         order = torch.topk(score, k, sorted=True).indices

@@ -27,10 +27,11 @@ def test_dense_maps_and_descriptors_match_published_code(anchors, reference, key
     np.testing.assert_allclose(dense["descriptors"][y, x], reference[f"{key}_desc_samples"], atol=1e-5)
 
 
+@pytest.mark.parametrize("fast", [True, False], ids=["fast", "plain"])
 @pytest.mark.parametrize("key", sorted(CHECKPOINTS))
-def test_multiscale_keypoints_are_the_published_set(anchors, reference, key):
+def test_multiscale_keypoints_are_the_published_set(anchors, reference, key, fast):
     model = LBurst.from_checkpoint(anchors / CHECKPOINTS[key], device="cpu")
-    feats = model.extract(reference["burst"], top_k=2000, published_coordinates=True)
+    feats = model.extract(reference["burst"], top_k=2000, published_coordinates=True, fast=fast)
     ours = np.c_[feats["keypoints"], feats["scales"]]
     ref = reference[f"{key}_keypoints"]
     dist, idx = cKDTree(ours).query(ref)
@@ -39,7 +40,7 @@ def test_multiscale_keypoints_are_the_published_set(anchors, reference, key):
     np.testing.assert_allclose(feats["scores"][idx], reference[f"{key}_scores"], atol=1e-5)
     np.testing.assert_allclose(feats["descriptors"][idx], reference[f"{key}_descriptors"], atol=1e-5)
     # the corrected convention differs by exactly the documented half-pixel term 0.5 * (W / w - 1)
-    corrected = model.extract(reference["burst"], top_k=2000)
+    corrected = model.extract(reference["burst"], top_k=2000, fast=fast)
     np.testing.assert_array_equal(corrected["scores"], feats["scores"])  # same keypoints, same order
     h, w = reference["burst"].shape[1:3]
     level = 32 / feats["scales"].astype(np.float64)  # the level's scale s
@@ -54,6 +55,28 @@ def test_published_frame_order():
     assert frame_permutation(5, "temporal") == [0, 1, 2, 3, 4]
     with pytest.raises(ValueError, match="frame order"):
         frame_permutation(5, "reversed")
+
+
+@pytest.mark.parametrize("size", [(75, 98), (64, 80)])
+def test_fast_network_matches_the_plain_one(size):
+    """Same maps and descriptors (the keypoint identity is checked on the reference burst above)."""
+    from lburst.fast import FastLBurstNet, descriptors_at
+
+    torch.manual_seed(0)
+    net = LBurstNet(NetConfig(frames=3)).eval()
+    for m in net.modules():  # non-trivial BatchNorm statistics, so folding is exercised
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+    x = torch.randn(1, 9, *size)
+    with torch.inference_mode():
+        plain = net(x)
+        rep, rel, half = FastLBurstNet(net)(x)
+        torch.testing.assert_close(rep, plain["repeatability"], atol=1e-5, rtol=0)
+        torch.testing.assert_close(rel, plain["reliability"], atol=1e-5, rtol=0)
+        yy, xx = torch.meshgrid(torch.arange(size[0] // 2 * 2), torch.arange(size[1] // 2 * 2), indexing="ij")
+        desc = descriptors_at(half, yy.flatten(), xx.flatten())
+        torch.testing.assert_close(desc, plain["descriptors"][0, :, yy.flatten(), xx.flatten()].t(), atol=1e-5, rtol=0)
 
 
 def test_odd_sizes_give_full_size_maps_with_no_keypoints_on_the_missing_row():
