@@ -35,7 +35,7 @@ from scipy.spatial.transform import Rotation
 
 from lburst.io import atomic_path
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
-from lburst.scenes.raycast import cast, intrinsics, pixel_rays
+from lburst.scenes.raycast import cast, intrinsics, rays_through
 from lburst.scenes.reference import Reference
 
 CONFIG_FILE = "night_flight.json"
@@ -71,7 +71,7 @@ class NightFlightConfig:
     turn_deg: float = 30.0
     pitch_deg: float = 35.0
     frame_interval: float = 0.05
-    burst_spacing: float = 6.0
+    burst_spacing: float = 8.0
     shake_deg: float = 0.3
     supersample: int = 1
     noise: str = "none"
@@ -159,12 +159,15 @@ def reference(cfg: NightFlightConfig) -> Reference:
 def ground_bounds(cfg: NightFlightConfig, margin: float = 10.0) -> np.ndarray:
     """(2, 2) ``[[x0, y0], [x1, y1]]`` covering the ground seen by every frame."""
     K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    w, h = cfg.width, cfg.height
+    xs, ys = np.linspace(0, w, 33), np.linspace(0, h, 25)
+    uv = np.concatenate([np.column_stack([xs, np.zeros_like(xs)]), np.column_stack([xs, np.full_like(xs, h)]),
+                         np.column_stack([np.zeros_like(ys), ys]), np.column_stack([np.full_like(ys, w), ys])])
     pts = []
     for i in range(cfg.n_bursts):
         for k in (0, cfg.frames_per_burst - 1):
             R, t = camera_pose(cfg, frame_time(cfg, i, k))
-            rays = pixel_rays(K, R, cfg.width, cfg.height)
-            border = np.concatenate([rays[0], rays[-1], rays[:, 0], rays[:, -1]])
+            border = rays_through(K, R, uv)
             dz = np.minimum(border[:, 2], -1e-3)
             dist = np.minimum(-cfg.altitude / dz, 8 * cfg.altitude)
             pts.append((-R.T @ t)[:2] + dist[:, None] * border[:, :2])
@@ -188,6 +191,29 @@ def render_view(city: City, K: np.ndarray, R: np.ndarray, t: np.ndarray, width: 
         image = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
         depth = depth[s // 2 :: s, s // 2 :: s]  # nearest sample (exact at odd s)
     return image, depth
+
+
+def view_overlaps(cfg: NightFlightConfig, city: City | None = None, scale: float = 0.25) -> np.ndarray:
+    """(n_bursts - 1,) fraction of the pixels of common frame ``i + 1`` whose surface point
+    is in view and unoccluded in common frame ``i`` (computed at ``scale`` x resolution)."""
+    city = make_city(cfg) if city is None else city
+    w, h = max(int(cfg.width * scale), 8), max(int(cfg.height * scale), 8)
+    K = intrinsics(w, h, cfg.hfov_deg)
+    views = []
+    for R, t in reference(cfg).poses.values():
+        hits = cast(K, R, t, w, h, city.lo, city.hi)
+        views.append((R, t, hits.points, hits.t * (hits.dirs @ R[2])))
+    out = []
+    for (Ra, ta, _, depth_a), (_, _, points_b, depth_b) in zip(views[:-1], views[1:]):
+        pts = points_b[np.isfinite(depth_b)]
+        cam = pts @ Ra.T + ta
+        uv = cam[:, :2] / cam[:, 2:] * K[[0, 1], [0, 1]] + K[:2, 2]
+        col, row = np.floor(uv[:, 0]).astype(int), np.floor(uv[:, 1]).astype(int)
+        inside = (cam[:, 2] > 0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        seen = depth_a[row[inside], col[inside]]
+        visible = np.abs(seen - cam[inside, 2]) < 0.03 * cam[inside, 2]
+        out.append(visible.sum() / (w * h))
+    return np.array(out)
 
 
 def _noise(spec: str) -> Noise | None:

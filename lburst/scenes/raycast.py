@@ -22,15 +22,18 @@ def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
     return np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
 
 
-def pixel_rays(K: np.ndarray, R: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Unit world-space directions (H, W, 3) float64 of the rays through the pixel centres."""
-    u = np.arange(width) + 0.5
-    v = np.arange(height) + 0.5
-    uu, vv = np.meshgrid(u, v)
-    pix = np.stack([uu, vv, np.ones_like(uu)], axis=-1)
-    cam = pix @ np.linalg.inv(K).T
+def rays_through(K: np.ndarray, R: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Unit world-space directions (..., 3) of the rays through image points ``uv`` (..., 2)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    cam = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1) @ np.linalg.inv(K).T
     world = cam @ R  # R^T applied to each row vector
     return world / np.linalg.norm(world, axis=-1, keepdims=True)
+
+
+def pixel_rays(K: np.ndarray, R: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Unit world-space directions (H, W, 3) float64 of the rays through the pixel centres."""
+    uu, vv = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    return rays_through(K, R, np.stack([uu, vv], axis=-1))
 
 
 @dataclass
