@@ -1,0 +1,332 @@
+"""The pycolmap (4.x) bridge: a COLMAP database from our features and matches, COLMAP's
+geometric verification, mapping, and export of the largest model.
+
+Everything that calls pycolmap runs in a child process (:func:`run_job` through
+``python -m lburst.sfm.colmap JOB_DIR``) because COLMAP aborts the whole process on some
+inputs (failed ``CHECK``s); the parent reads the files the child leaves in ``JOB_DIR``:
+
+- written by the parent: ``job.json`` (:class:`ColmapJob`) and ``input.npz`` with
+  ``kp_<i>`` (K_i, 2) float32 keypoints of image ``i`` in lburst's convention (pixel
+  centres at integer coordinates: +0.5 is added for COLMAP here, once), ``pairs``
+  (P, 2) image indices and ``m_<p>`` (M_p, 2) keypoint indices of pair ``p``'s matches;
+- written by the child: ``database.db``, ``verified.npz`` (``pairs`` (Q, 2) image
+  indices, ``inl_<q>`` (M_q, 2) keypoint indices of the inlier matches COLMAP kept),
+  ``model/`` (COLMAP binary model), ``model.ply`` and ``output.json``
+  (:func:`summarize`: registered images with world-to-camera ``R``, ``t`` and camera).
+
+Note: ``cv2`` is imported before ``pycolmap`` on purpose: importing pycolmap first makes
+later PNG writes by OpenCV (or PIL) in the same process abort with ``free(): invalid
+pointer`` (their bundled zlib/libpng clash).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import cv2  # noqa: F401  (must be loaded before pycolmap, see module docstring)
+import numpy as np
+import pycolmap
+
+from lburst.io import atomic_path
+
+DEFAULT_FOCAL_FACTOR = 1.2  # COLMAP's own default prior: f = 1.2 * max(W, H)
+
+
+class ColmapError(RuntimeError):
+    """COLMAP failed (or aborted); the message says how, with the end of its log."""
+
+
+@dataclass
+class ColmapOptions:
+    """Verification and mapping settings (COLMAP defaults unless noted).
+
+    Attributes:
+        mapper: ``'incremental'`` (COLMAP) or ``'global'`` (GLOMAP, built into pycolmap 4.x).
+        num_threads: threads for verification and mapping (2 here, a shared machine).
+        seed: seed of RANSAC and of the mapper (runs are repeatable).
+        min_num_inliers: fewest inliers for a verified pair (COLMAP: 15).
+        max_error: RANSAC epipolar error threshold in pixels (COLMAP: 4).
+        min_model_size: fewest registered images for a model to be kept (3; COLMAP's 10
+            would drop every model of a small scene).
+        refine_focal_length, refine_extra_params: bundle adjustment of the intrinsics.
+    """
+
+    mapper: str = "incremental"
+    num_threads: int = 2
+    seed: int = 0
+    min_num_inliers: int = 15
+    max_error: float = 4.0
+    min_model_size: int = 3
+    refine_focal_length: bool = True
+    refine_extra_params: bool = True
+
+
+@dataclass
+class ColmapJob:
+    """What the child process is asked to do (saved as ``job.json``).
+
+    ``cameras`` are COLMAP camera dicts ``{model, width, height, params, prior_focal}``;
+    image ``i`` (named ``names[i]``, stored as ``names[i] + '.png'`` in ``image_dir``)
+    uses camera ``camera_of_image[i]``.
+    """
+
+    names: list[str]
+    image_dir: str
+    cameras: list[dict]
+    camera_of_image: list[int]
+    options: ColmapOptions = field(default_factory=ColmapOptions)
+
+    def save(self, path: Path) -> None:
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(asdict(self), indent=1))
+
+    @classmethod
+    def load(cls, path: Path) -> "ColmapJob":
+        data = json.loads(Path(path).read_text())
+        data["options"] = ColmapOptions(**data["options"])
+        return cls(**data)
+
+
+def image_file(name: str) -> str:
+    """File name of image ``name`` in the COLMAP image folder."""
+    return f"{name}.png"
+
+
+def camera_params(model: str, width: int, height: int, focal: float) -> list[float]:
+    """Parameters of a COLMAP camera ``model`` with focal ``focal``, centred principal point, no distortion."""
+    cx, cy = width / 2.0, height / 2.0
+    params = {
+        "SIMPLE_PINHOLE": [focal, cx, cy],
+        "PINHOLE": [focal, focal, cx, cy],
+        "SIMPLE_RADIAL": [focal, cx, cy, 0.0],
+        "RADIAL": [focal, cx, cy, 0.0, 0.0],
+        "OPENCV": [focal, focal, cx, cy, 0.0, 0.0, 0.0, 0.0],
+    }
+    if model not in params:
+        raise ValueError(f"unsupported camera model {model!r}; use one of {', '.join(params)}")
+    return params[model]
+
+
+def default_camera(width: int, height: int, model: str = "SIMPLE_RADIAL", focal: float | None = None) -> dict:
+    """A camera dict; without ``focal``, COLMAP's default prior ``f = 1.2 * max(W, H)`` (not trusted)."""
+    f = DEFAULT_FOCAL_FACTOR * max(width, height) if focal is None else focal
+    return {"model": model, "width": int(width), "height": int(height),
+            "params": camera_params(model, width, height, f), "prior_focal": focal is not None}
+
+
+def exif_camera(path: str | Path, model: str = "SIMPLE_RADIAL") -> dict | None:
+    """Camera dict with the focal length from the image's EXIF (COLMAP's sensor database), or ``None``."""
+    camera = pycolmap.infer_camera_from_image(str(path))
+    if not camera.has_prior_focal_length:
+        return None
+    return default_camera(camera.width, camera.height, model, focal=float(camera.focal_length))
+
+
+def _pycolmap_camera(camera: dict) -> pycolmap.Camera:
+    cam = pycolmap.Camera.create_from_model_name(0, camera["model"], 1.0, int(camera["width"]), int(camera["height"]))
+    cam.params = np.asarray(camera["params"], dtype=np.float64)
+    cam.has_prior_focal_length = bool(camera.get("prior_focal", False))
+    return cam
+
+
+def write_database(db_path: str | Path, job: ColmapJob, keypoints: list[np.ndarray],
+                   pairs: np.ndarray, matches: list[np.ndarray]) -> list[int]:
+    """Create ``db_path`` afresh with the job's cameras, one rig and frame per image, keypoints and matches.
+
+    ``keypoints[i]`` (K_i, 2) are in lburst's convention and stored +0.5 (COLMAP's);
+    ``matches[p]`` (M_p, 2) index the keypoints of images ``pairs[p]``.  Returns the
+    database image id of each image.  Raises ``ValueError`` for malformed input
+    (pycolmap would abort the process on it).
+    """
+    db_path = Path(db_path)
+    if len(keypoints) != len(job.names) or len(pairs) != len(matches):
+        raise ValueError("one keypoint array per image and one match array per pair are needed")
+    for i, kp in enumerate(keypoints):
+        if kp.ndim != 2 or kp.shape[1] != 2:
+            raise ValueError(f"keypoints of {job.names[i]!r} must be (K, 2), got {kp.shape}")
+    for (a, b), m in zip(pairs, matches):
+        if m.ndim != 2 or m.shape[1] != 2:
+            raise ValueError(f"matches of pair {a, b} must be (M, 2), got {m.shape}")
+        if len(m) and (m.min() < 0 or m[:, 0].max() >= len(keypoints[a]) or m[:, 1].max() >= len(keypoints[b])):
+            raise ValueError(f"matches of pair {job.names[a]!r}-{job.names[b]!r} index missing keypoints")
+    for suffix in ("", "-wal", "-shm"):
+        Path(str(db_path) + suffix).unlink(missing_ok=True)
+    image_ids: list[int] = []
+    with pycolmap.Database.open(str(db_path)) as db:
+        camera_ids, rig_ids = [], []
+        for camera in job.cameras:
+            cam = _pycolmap_camera(camera)
+            cam.camera_id = db.write_camera(cam)
+            rig = pycolmap.Rig()
+            rig.add_ref_sensor(cam.sensor_id)
+            camera_ids.append(cam.camera_id)
+            rig_ids.append(db.write_rig(rig))
+        for name, cam_index, kp in zip(job.names, job.camera_of_image, keypoints):
+            image = pycolmap.Image(name=image_file(name), camera_id=camera_ids[cam_index])
+            image.image_id = db.write_image(image)
+            frame = pycolmap.Frame()
+            frame.rig_id = rig_ids[cam_index]
+            frame.add_data_id(image.data_id)
+            db.write_frame(frame)
+            db.write_keypoints(image.image_id, np.ascontiguousarray(kp, dtype=np.float32) + np.float32(0.5))
+            image_ids.append(image.image_id)
+        for (a, b), m in zip(pairs, matches):
+            db.write_matches(image_ids[a], image_ids[b], np.ascontiguousarray(m, dtype=np.uint32))
+    return image_ids
+
+
+def verify(db_path: str | Path, options: ColmapOptions) -> None:
+    """COLMAP's geometric verification of every matched pair in the database (E, F or H with RANSAC)."""
+    two_view = pycolmap.TwoViewGeometryOptions()
+    two_view.min_num_inliers = options.min_num_inliers
+    two_view.ransac.max_error = options.max_error
+    two_view.ransac.random_seed = options.seed
+    verifier = pycolmap.GeometricVerifierOptions()
+    verifier.num_threads = options.num_threads
+    pycolmap.geometric_verification(str(db_path), verifier_options=verifier, two_view_geometry_options=two_view)
+
+
+def read_inliers(db_path: str | Path, image_ids: list[int]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Verified pairs (Q, 2) as image indices ``a < b`` and their inlier keypoint index pairs (M_q, 2)."""
+    index = {image_id: i for i, image_id in enumerate(image_ids)}
+    pairs, inliers = [], []
+    with pycolmap.Database.open(str(db_path)) as db:
+        pair_ids, geometries = db.read_two_view_geometries()
+    for pair_id, geometry in zip(pair_ids, geometries):
+        id1, id2 = pycolmap.pair_id_to_image_pair(pair_id)
+        m = np.asarray(geometry.inlier_matches, dtype=np.int64).reshape(-1, 2)
+        a, b = index[id1], index[id2]
+        if a > b:
+            a, b, m = b, a, m[:, ::-1]
+        if len(m):
+            pairs.append((a, b))
+            inliers.append(np.ascontiguousarray(m))
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2), inliers
+
+
+def map_database(db_path: str | Path, image_dir: str | Path, work_dir: str | Path,
+                 options: ColmapOptions) -> pycolmap.Reconstruction | None:
+    """Run the mapper; return the model with the most registered images, or ``None`` if none."""
+    pycolmap.set_random_seed(options.seed)
+    work_dir = Path(work_dir)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    if options.mapper == "incremental":
+        opts = pycolmap.IncrementalPipelineOptions()
+        opts.num_threads = options.num_threads
+        opts.random_seed = options.seed
+        opts.min_model_size = options.min_model_size
+        opts.ba_refine_focal_length = options.refine_focal_length
+        opts.ba_refine_extra_params = options.refine_extra_params
+        models = pycolmap.incremental_mapping(str(db_path), str(image_dir), str(work_dir), opts)
+    elif options.mapper == "global":
+        opts = pycolmap.GlobalPipelineOptions()
+        opts.num_threads = options.num_threads
+        opts.random_seed = options.seed
+        opts.min_model_size = options.min_model_size
+        opts.mapper.bundle_adjustment.refine_focal_length = options.refine_focal_length
+        opts.mapper.bundle_adjustment.refine_extra_params = options.refine_extra_params
+        models = pycolmap.global_mapping(str(db_path), str(image_dir), str(work_dir), opts)
+    else:
+        raise ValueError(f"unknown mapper {options.mapper!r}: expected 'incremental' or 'global'")
+    if not models:
+        return None
+    return max(models.values(), key=lambda rec: rec.num_reg_images())
+
+
+def summarize(rec: pycolmap.Reconstruction | None) -> dict:
+    """JSON-ready summary: registered images (name without suffix -> R, t world-to-camera, camera) and model statistics."""
+    if rec is None:
+        return {"converged": False, "registered": {}, "num_points3D": 0}
+    registered = {}
+    for image_id in rec.reg_image_ids():
+        image = rec.images[image_id]
+        pose = image.cam_from_world()
+        camera = rec.cameras[image.camera_id]
+        registered[Path(image.name).stem] = {
+            "R": pose.rotation.matrix().tolist(),
+            "t": np.asarray(pose.translation).tolist(),
+            "camera": {"model": camera.model.name, "width": camera.width, "height": camera.height,
+                       "params": np.asarray(camera.params).tolist()},
+            "num_points3D": int(image.num_points3D),
+        }
+    return {
+        "converged": True,
+        "registered": registered,
+        "num_points3D": int(rec.num_points3D()),
+        "num_observations": int(rec.compute_num_observations()),
+        "mean_track_length": float(rec.compute_mean_track_length()) if rec.num_points3D() else 0.0,
+        "mean_reprojection_error": float(rec.compute_mean_reprojection_error()) if rec.num_points3D() else 0.0,
+    }
+
+
+def export_model(rec: pycolmap.Reconstruction, job_dir: Path) -> None:
+    """Write ``job_dir/model`` (COLMAP binary) and ``job_dir/model.ply`` (the 3D points), replacing old ones."""
+    tmp = job_dir / "model.tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    rec.write_binary(str(tmp))
+    shutil.rmtree(job_dir / "model", ignore_errors=True)
+    tmp.rename(job_dir / "model")
+    with atomic_path(job_dir / "model.ply") as ply:
+        rec.export_PLY(str(ply))
+
+
+def run_job(job_dir: str | Path) -> dict:
+    """Do the job of ``job_dir`` in this process (see the module docstring); return the summary."""
+    job_dir = Path(job_dir)
+    job = ColmapJob.load(job_dir / "job.json")
+    data = np.load(job_dir / "input.npz")
+    keypoints = [data[f"kp_{i}"] for i in range(len(job.names))]
+    pairs = data["pairs"].reshape(-1, 2)
+    matches = [data[f"m_{p}"] for p in range(len(pairs))]
+    db_path = job_dir / "database.db"
+    image_ids = write_database(db_path, job, keypoints, pairs, matches)
+    verify(db_path, job.options)
+    v_pairs, inliers = read_inliers(db_path, image_ids)
+    with atomic_path(job_dir / "verified.npz") as tmp:
+        np.savez(tmp, pairs=v_pairs, **{f"inl_{q}": m for q, m in enumerate(inliers)})
+    rec = map_database(db_path, job.image_dir, job_dir / "mapper", job.options) if len(v_pairs) else None
+    if rec is not None:
+        export_model(rec, job_dir)
+    summary = summarize(rec)
+    with atomic_path(job_dir / "output.json") as tmp:
+        tmp.write_text(json.dumps(summary))
+    return summary
+
+
+def run_job_subprocess(job_dir: str | Path, timeout: float | None = None) -> dict:
+    """Run :func:`run_job` in a child Python process (COLMAP's log goes to ``job_dir/colmap.log``).
+
+    Raises ``ColmapError`` with the end of the log when the child fails or aborts.
+    """
+    job_dir = Path(job_dir)
+    (job_dir / "output.json").unlink(missing_ok=True)
+    log_path = job_dir / "colmap.log"
+    with open(log_path, "w") as log:
+        try:
+            proc = subprocess.run([sys.executable, "-m", "lburst.sfm.colmap", str(job_dir)], stdout=log,
+                                  stderr=subprocess.STDOUT, timeout=timeout)
+        except subprocess.TimeoutExpired as err:
+            raise ColmapError(f"COLMAP did not finish in {timeout} s (log: {log_path})") from err
+    if proc.returncode != 0 or not (job_dir / "output.json").is_file():
+        tail = "".join(log_path.read_text(errors="replace").splitlines(keepends=True)[-8:])
+        how = f"was killed by signal {-proc.returncode}" if proc.returncode < 0 else f"exited with {proc.returncode}"
+        raise ColmapError(f"COLMAP {how} (log: {log_path}):\n{tail}")
+    return json.loads((job_dir / "output.json").read_text())
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Run one COLMAP job folder (internal to lburst reconstruct).")
+    parser.add_argument("job_dir")
+    run_job(parser.parse_args(argv).job_dir)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

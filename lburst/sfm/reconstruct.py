@@ -1,0 +1,326 @@
+"""``lburst reconstruct``: a scene of bursts to a 3D model with COLMAP, and its metrics.
+
+Pipeline (:func:`reconstruct_scene`): features of each burst's common frame with any
+method spec (cached in ``OUT/features/<name>.npz``, so an interrupted run resumes), the
+common frames written as ``OUT/images/<name>.png`` for COLMAP, image pairs (exhaustive,
+or sequential with an overlap for trajectories), mutual-nearest-neighbour matching, then
+COLMAP in a child process (:mod:`lburst.sfm.colmap`): database, geometric verification,
+mapping; the largest model is written to ``OUT/colmap/model`` (binary) and
+``OUT/colmap/model.ply``, and ``OUT/result.json`` holds the metrics
+(:mod:`lburst.sfm.metrics`), the registered images and their poses.
+
+Cameras: one COLMAP camera per distinct prior (so a scene from one camera shares one).
+The prior is, by ``camera`` option: ``'auto'`` the focal length from EXIF when a single
+image has one, else COLMAP's default ``SIMPLE_RADIAL`` with ``f = 1.2 * max(W, H)`` and a
+centred principal point; ``'default'`` always the latter; ``'reference'`` the scene's
+``reference.json`` cameras (refined too unless ``fix_intrinsics``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from lburst.features import Features, check_features
+from lburst.io import atomic_path
+from lburst.match import mutual_nearest_neighbours
+from lburst.sfm.pairs import exhaustive_pairs, make_pairs
+from lburst.sfm.scene import Scene, SceneError, SceneItem, exif_source, list_scene, load_item, reference_cameras
+
+AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto': exhaustive up to this many images, else sequential
+RESULT_FILE = "result.json"
+
+
+class ReconstructionError(RuntimeError):
+    """A scene that cannot be reconstructed (bad input); the message says which file and why."""
+
+
+@dataclass
+class ReconstructOptions:
+    """How to reconstruct (see the module docstring); ``colmap`` is a :class:`lburst.sfm.colmap.ColmapOptions` dict."""
+
+    pairs: str = "auto"
+    overlap: int = 10
+    fallback_exhaustive: bool = False
+    camera: str = "auto"
+    camera_model: str = "SIMPLE_RADIAL"
+    fix_intrinsics: bool = False
+    mapper: str = "incremental"
+    num_threads: int = 2
+    seed: int = 0
+    progress: bool = True
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class ReconstructionResult:
+    """One method on one scene.
+
+    Attributes:
+        scene, method, out_dir: what was run and where its files are.
+        names: all images of the scene in trajectory order.
+        registered: names of the images in the largest model.
+        poses: name -> ``(R (3, 3), t (3,))`` world-to-camera (COLMAP convention, model's frame).
+        cameras: name -> COLMAP camera dict of the registered images (as refined).
+        metrics: the table's columns (:mod:`lburst.sfm.metrics`), reference ones included
+            when the scene has a reference.
+        error: why COLMAP failed, or ``None``.
+    """
+
+    scene: str
+    method: str
+    out_dir: str
+    names: list[str]
+    registered: list[str] = field(default_factory=list)
+    poses: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    cameras: dict[str, dict] = field(default_factory=dict)
+    metrics: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.metrics.get("converged"))
+
+    def to_json(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["poses"] = {n: {"R": np.asarray(R).tolist(), "t": np.asarray(t).tolist()} for n, (R, t) in self.poses.items()}
+        return data
+
+    def save(self, path: str | Path | None = None) -> Path:
+        path = Path(path or Path(self.out_dir) / RESULT_FILE)
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(self.to_json(), indent=1))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "ReconstructionResult":
+        data = json.loads(Path(path).read_text())
+        data["poses"] = {n: (np.array(p["R"]), np.array(p["t"])) for n, p in data["poses"].items()}
+        return cls(**data)
+
+    def match_data(self) -> tuple[list[np.ndarray], np.ndarray, list[np.ndarray]] | None:
+        """Keypoints (lburst convention) of every image, verified pairs (Q, 2) and their inliers, from ``out_dir``."""
+        out = Path(self.out_dir)
+        verified = out / "colmap" / "verified.npz"
+        if not verified.is_file():
+            return None
+        keypoints = [np.load(out / "features" / f"{name}.npz")["keypoints"] for name in self.names]
+        data = np.load(verified)
+        pairs = data["pairs"].reshape(-1, 2)
+        return keypoints, pairs, [data[f"inl_{q}"] for q in range(len(pairs))]
+
+
+def _safe_name(name: str) -> str:
+    if "/" in name or name.startswith("."):
+        raise ReconstructionError(f"image name {name!r} cannot be used as a file name")
+    return name
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """An RGB image (H, W, 3) uint8/uint16 as uint8 (uint16 scaled by 255/65535)."""
+    if image.dtype == np.uint16:
+        return np.clip(np.rint(image * (255.0 / 65535.0)), 0, 255).astype(np.uint8)
+    return image
+
+
+def save_features(path: Path, features: Features, spec: str, shape: tuple[int, int]) -> None:
+    with atomic_path(path) as tmp:
+        np.savez(tmp, _spec=np.array(spec), _shape=np.array(shape), **features)
+
+
+def load_features(path: Path, spec: str) -> tuple[Features, tuple[int, int]] | None:
+    """Cached features of ``spec``, or ``None`` (missing, other method, unreadable)."""
+    if not path.is_file():
+        return None
+    try:
+        data = np.load(path)
+        if str(data["_spec"]) != spec:
+            return None
+        features = {k: data[k] for k in data.files if not k.startswith("_")}
+        return check_features(features), tuple(int(v) for v in data["_shape"])
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def scene_features(scene: Scene, spec: str, out: Path, progress: bool = True,
+                   extractor=None) -> tuple[list[Features], list[tuple[int, int]]]:
+    """Features and image size (H, W) of each item's common frame; writes ``out/images/<name>.png`` too."""
+    features, shapes = [], []
+    for item in tqdm(scene.items, desc=f"features {spec}", disable=not progress, leave=False):
+        cache = out / "features" / f"{_safe_name(item.name)}.npz"
+        image_path = out / "images" / f"{item.name}.png"
+        cached = load_features(cache, spec)
+        if cached is not None and image_path.is_file():
+            features.append(cached[0])
+            shapes.append(cached[1])
+            continue
+        burst = load_item(item)
+        common = burst[len(burst) // 2]
+        with atomic_path(image_path) as tmp:
+            if not cv2.imwrite(str(tmp), cv2.cvtColor(to_uint8(common), cv2.COLOR_RGB2BGR)):
+                raise ReconstructionError(f"cannot write {image_path}")
+        if cached is None:
+            if extractor is None:
+                from lburst.methods import create
+
+                extractor = create(spec)
+            feats = check_features(extractor(burst))
+            save_features(cache, feats, spec, common.shape[:2])
+        else:
+            feats = cached[0]
+        features.append(feats)
+        shapes.append(common.shape[:2])
+    return features, shapes
+
+
+def scene_cameras(scene: Scene, shapes: list[tuple[int, int]], options: ReconstructOptions) -> tuple[list[dict], list[int]]:
+    """COLMAP camera priors (distinct dicts) and the camera index of every image (module docstring)."""
+    from lburst.sfm.colmap import default_camera, exif_camera
+
+    ref_cams = None
+    if options.camera == "reference":
+        if scene.reference_path is None:
+            raise ReconstructionError(f"{scene.root}: camera='reference' but the scene has no reference.json")
+        ref_cams = reference_cameras(scene.reference_path)
+    elif options.camera not in ("auto", "default"):
+        raise ReconstructionError(f"unknown camera option {options.camera!r}: expected auto, default or reference")
+    priors = []
+    for item, (h, w) in zip(scene.items, shapes):
+        camera = None
+        if ref_cams is not None:
+            if item.name not in ref_cams:
+                raise ReconstructionError(f"{scene.reference_path}: no camera for image {item.name!r}")
+            camera = {**ref_cams[item.name], "prior_focal": True}
+        elif options.camera == "auto" and exif_source(item) is not None:
+            camera = exif_camera(exif_source(item), options.camera_model)
+        priors.append(camera or default_camera(w, h, options.camera_model))
+    cameras: list[dict] = []
+    index = []
+    for prior in priors:
+        if prior not in cameras:
+            cameras.append(prior)
+        index.append(cameras.index(prior))
+    if len(cameras) < len(priors) and len(cameras) > 1:  # shared only when every image has the same prior
+        cameras, index = priors, list(range(len(priors)))
+    return cameras, index
+
+
+def match_pairs(features: list[Features], pairs: list[tuple[int, int]], progress: bool = True) -> list[np.ndarray]:
+    """Mutual nearest-neighbour matches (M, 2) of each pair."""
+    return [mutual_nearest_neighbours(features[a]["descriptors"], features[b]["descriptors"])
+            for a, b in tqdm(pairs, desc="matching", disable=not progress, leave=False)]
+
+
+def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Path, extractor=None,
+                      **options: Any) -> ReconstructionResult:
+    """Reconstruct ``scene_dir`` with features ``method_spec``; files and ``result.json`` go to ``out_dir``.
+
+    ``options`` are :class:`ReconstructOptions` fields.  ``extractor`` (optional) is used
+    instead of creating one from the spec.  Raises :class:`ReconstructionError` for a
+    scene that cannot be used (not a folder, no images, a single image, an unreadable
+    burst); a COLMAP failure is returned as a result with ``error`` set.
+    """
+    from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
+    from lburst.sfm.metrics import evaluate_against_reference, scene_metrics
+
+    opts = ReconstructOptions(**options)
+    out = Path(out_dir)
+    try:
+        scene = list_scene(scene_dir)
+        if len(scene.items) < 2:
+            raise ReconstructionError(f"{scene_dir}: a reconstruction needs at least 2 images, found {len(scene.items)}")
+        features, shapes = scene_features(scene, method_spec, out, opts.progress, extractor)
+        cameras, camera_of_image = scene_cameras(scene, shapes, opts)
+    except SceneError as err:
+        raise ReconstructionError(str(err)) from err
+    n = len(scene.items)
+    mode = opts.pairs if opts.pairs != "auto" else ("exhaustive" if n <= AUTO_EXHAUSTIVE_MAX else "sequential")
+    pairs = make_pairs(n, mode, opts.overlap)
+    matches = match_pairs(features, pairs, opts.progress)
+    colmap_options = ColmapOptions(mapper=opts.mapper, num_threads=opts.num_threads, seed=opts.seed,
+                                   refine_focal_length=not opts.fix_intrinsics,
+                                   refine_extra_params=not opts.fix_intrinsics, **opts.extra)
+    job = ColmapJob(scene.names, str((out / "images").resolve()), cameras, camera_of_image, colmap_options)
+    job_dir = out / "colmap"
+    job_dir.mkdir(parents=True, exist_ok=True)
+    result = ReconstructionResult(str(scene.root), method_spec, str(out), scene.names)
+    summary: dict = {"converged": False, "registered": {}, "num_points3D": 0}
+    for attempt in range(2):
+        job.save(job_dir / "job.json")
+        with atomic_path(job_dir / "input.npz") as tmp:
+            np.savez(tmp, pairs=np.array(pairs, dtype=np.int64).reshape(-1, 2),
+                     **{f"kp_{i}": f["keypoints"] for i, f in enumerate(features)},
+                     **{f"m_{p}": m for p, m in enumerate(matches)})
+        try:
+            summary = run_job_subprocess(job_dir)
+            result.error = None
+        except ColmapError as err:
+            result.error = str(err)
+        done = len(summary.get("registered", {})) == n
+        if attempt or done or not opts.fallback_exhaustive or mode == "exhaustive":
+            break
+        extra = [p for p in exhaustive_pairs(n) if p not in set(pairs)]
+        pairs, matches = pairs + extra, matches + match_pairs(features, extra, opts.progress)
+    verified = np.load(job_dir / "verified.npz") if (job_dir / "verified.npz").is_file() and not result.error else None
+    inlier_counts = [len(verified[k]) for k in verified.files if k.startswith("inl_")] if verified is not None else []
+    result.metrics = scene_metrics(n, [len(f["keypoints"]) for f in features], [len(m) for m in matches],
+                                   inlier_counts, summary if not result.error else {})
+    result.metrics.update(pairs=len(pairs), pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive")
+    for name, image in summary.get("registered", {}).items():
+        result.registered.append(name)
+        result.poses[name] = (np.array(image["R"]), np.array(image["t"]))
+        result.cameras[name] = image["camera"]
+    result.registered.sort(key=scene.names.index)
+    if scene.reference_path is not None and not result.error:
+        result.metrics.update(evaluate_against_reference(result, scene.reference(),
+                                                         reference_cameras(scene.reference_path)))
+    result.save()
+    return result
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scene", help="scene folder: one sub-folder of frames per burst, or single images")
+    parser.add_argument("--method", default="lburst", help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...)")
+    parser.add_argument("--out", required=True, help="output folder (features cache, COLMAP files, result.json)")
+    parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto",
+                        help=f"image pairs to match (auto: exhaustive up to {AUTO_EXHAUSTIVE_MAX} images)")
+    parser.add_argument("--overlap", type=int, default=10, help="sequential pairs: neighbours on each side")
+    parser.add_argument("--fallback-exhaustive", action="store_true",
+                        help="rerun with all pairs when sequential pairs leave images unregistered")
+    parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
+    parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto",
+                        help="intrinsics prior: EXIF or default (auto), default, or the scene's reference.json")
+    parser.add_argument("--camera-model", default="SIMPLE_RADIAL")
+    parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=0)
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        result = reconstruct_scene(args.scene, args.method, args.out, pairs=args.pairs, overlap=args.overlap,
+                                   fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
+                                   camera=args.camera, camera_model=args.camera_model,
+                                   fix_intrinsics=args.fix_intrinsics, num_threads=args.threads, seed=args.seed)
+    except (ReconstructionError, ValueError) as err:
+        print(f"lburst reconstruct: {err}", file=sys.stderr)
+        return 1
+    from lburst.sfm.metrics import markdown_table
+
+    print(markdown_table([{"method": result.method, "scene": Path(result.scene).name, **result.metrics}]))
+    if result.error:
+        print(f"lburst reconstruct: {result.error}", file=sys.stderr)
+        return 1
+    if not result.converged:
+        print(f"lburst reconstruct: no model: COLMAP registered no images of {args.scene}", file=sys.stderr)
+        return 1
+    print(f"{len(result.registered)}/{len(result.names)} images registered; model in {Path(args.out) / 'colmap'}")
+    return 0

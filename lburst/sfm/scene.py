@@ -1,0 +1,154 @@
+"""Listing a scene folder: its bursts (or single images) in trajectory order, and its reference.
+
+A scene folder holds one sub-folder per burst, ``SCENE/<burst>/frame_000.png ...``, or
+single images ``SCENE/<name>.png|jpg|...``, named so that natural sort order
+(``2`` before ``10``) is trajectory order, and optionally ``SCENE/reference.json``
+(:class:`lburst.scenes.reference.Reference`).  An item's *name* is the sub-folder name
+or the image file's stem; it names the image in COLMAP and in ``reference.json``.
+
+``reference.json`` may carry, beside its one ``camera``, a ``cameras`` object mapping
+image names to COLMAP camera dicts, for scenes whose images come from different cameras;
+:func:`reference_cameras` reads either form.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from lburst.scenes.reference import Reference
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
+REFERENCE_FILE = "reference.json"
+
+
+class SceneError(ValueError):
+    """A scene folder (or one of its items) that cannot be used; the message names it."""
+
+
+def natural_key(text: str) -> list:
+    """Sort key putting ``img2`` before ``img10``."""
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", text)]
+
+
+@dataclass(frozen=True)
+class SceneItem:
+    """One burst folder (``kind='burst'``) or single image (``kind='image'``) of a scene."""
+
+    name: str
+    path: Path
+    kind: str
+
+
+@dataclass(frozen=True)
+class Scene:
+    """The items of a scene in trajectory order and its optional reference file."""
+
+    root: Path
+    items: tuple[SceneItem, ...]
+    reference_path: Path | None
+
+    @property
+    def names(self) -> list[str]:
+        return [item.name for item in self.items]
+
+    def reference(self) -> Reference | None:
+        """The scene's reference cameras, or ``None`` when it has no ``reference.json``."""
+        return None if self.reference_path is None else Reference.load(self.reference_path)
+
+
+def _has_frames(folder: Path) -> bool:
+    return any(p.suffix.lower() in IMAGE_SUFFIXES for p in folder.iterdir() if p.is_file())
+
+
+def list_scene(root: str | Path) -> Scene:
+    """The bursts and single images of ``root`` in natural order; ``SceneError`` if there are none.
+
+    Hidden entries and sub-folders without image files are ignored; a name used by both
+    a burst folder and an image file is an error.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise SceneError(f"{root}: not a folder")
+    items: dict[str, SceneItem] = {}
+    for entry in root.iterdir():
+        if entry.name.startswith("."):
+            continue
+        if entry.is_dir() and _has_frames(entry):
+            item = SceneItem(entry.name, entry, "burst")
+        elif entry.is_file() and entry.suffix.lower() in IMAGE_SUFFIXES:
+            item = SceneItem(entry.stem, entry, "image")
+        else:
+            continue
+        if item.name in items:
+            raise SceneError(f"{root}: two items named {item.name!r} ({items[item.name].path.name}, {entry.name})")
+        items[item.name] = item
+    if not items:
+        raise SceneError(f"{root}: no bursts (sub-folders of frames) or images found")
+    ordered = tuple(items[name] for name in sorted(items, key=natural_key))
+    reference = root / REFERENCE_FILE
+    return Scene(root, ordered, reference if reference.is_file() else None)
+
+
+def read_image(path: Path) -> np.ndarray:
+    """An image file as RGB ``(H, W, 3)`` uint8 or uint16; ``SceneError`` naming the file if unreadable."""
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise SceneError(f"{path}: cannot be read as an image")
+    if image.dtype not in (np.uint8, np.uint16):
+        raise SceneError(f"{path}: unsupported pixel type {image.dtype} (need 8 or 16 bit)")
+    if image.ndim == 2:
+        image = np.repeat(image[:, :, None], 3, axis=2)
+    elif image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
+    else:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    return image
+
+
+def load_item(item: SceneItem) -> np.ndarray:
+    """The burst ``(N, H, W, 3)`` of an item (a single image is a 1-frame burst).
+
+    Raises ``SceneError`` naming the file when it cannot be read.
+    """
+    if item.kind == "image":
+        return read_image(item.path)[None]
+    from lburst.io import BurstError, load_burst
+
+    try:
+        return load_burst(item.path)
+    except BurstError as err:
+        raise SceneError(str(err)) from err
+
+
+def exif_source(item: SceneItem) -> Path | None:
+    """The file whose EXIF may give a focal length prior: the image of a single-image item."""
+    return item.path if item.kind == "image" and item.path.suffix.lower() in (".jpg", ".jpeg", ".tif", ".tiff") else None
+
+
+def reference_cameras(path: str | Path) -> dict[str, dict]:
+    """Image name -> COLMAP camera dict from ``reference.json`` (per-image ``cameras`` or the one ``camera``)."""
+    data = json.loads(Path(path).read_text())
+    per_image = data.get("cameras") or {}
+    return {name: dict(per_image.get(name, data["camera"])) for name in data["images"]}
+
+
+def save_reference(reference: Reference, path: str | Path, cameras: dict[str, dict] | None = None) -> None:
+    """Write ``reference.json`` atomically, with per-image ``cameras`` when given."""
+    from lburst.io import atomic_path
+
+    data = reference.to_json()
+    if cameras:
+        data["cameras"] = {name: _camera_json(cam) for name, cam in cameras.items()}
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=1))
+
+
+def _camera_json(camera: dict) -> dict:
+    return {"model": str(camera["model"]), "width": int(camera["width"]), "height": int(camera["height"]),
+            "params": [float(v) for v in camera["params"]]}
