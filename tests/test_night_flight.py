@@ -100,7 +100,7 @@ def test_box_lands_where_reference_projects_it(burst):
     i, j = np.argwhere(d_roof > 1)[0]
     ray = np.linalg.inv(K) @ np.array([j + 0.5, i + 0.5, 1.0])
     world = centre + (R.T @ ray) * (12.0 - centre[2]) / (R.T @ ray)[2]
-    np.testing.assert_allclose(depth[i, j], (R @ world + t)[2], rtol=1e-9)
+    np.testing.assert_allclose(depth[i, j], (R @ world + t)[2], rtol=1e-6)  # boxes are cast in float32
 
 
 def test_burst_frames_follow_the_flight():

@@ -247,31 +247,36 @@ def build_city(bounds: np.ndarray, cfg: CityConfig, rng: np.random.Generator) ->
 def shade(city: City, hits: Hits, focal: float) -> np.ndarray:
     """Colour (H, W, 3) float32 (0..255) of every ray's hit; ``focal`` in pixels sets the
     texture level of detail (pixel footprint ``t / focal`` over the surface's obliquity)."""
-    out = np.broadcast_to(city.sky, hits.t.shape + (3,)).copy()
-    box, axis = hits.box, hits.axis
-    normal_cos = np.abs(np.take_along_axis(hits.dirs, axis[..., None].astype(np.int64), -1)[..., 0])
-    foot = np.where(np.isfinite(hits.t), hits.t, 0.0) / focal / np.sqrt(np.maximum(normal_cos, 0.05))
-    x, y, z = hits.points[..., 0], hits.points[..., 1], hits.points[..., 2]
+    shape = hits.t.shape
+    out = np.broadcast_to(city.sky, shape + (3,)).reshape(-1, 3).copy()
+    box, axis = hits.box.ravel(), hits.axis.ravel()
+    points, dirs, dist = hits.points.reshape(-1, 3), hits.dirs.reshape(-1, 3), hits.t.ravel()
 
-    m = box == GROUND
-    u = (x[m] - city.origin[0]) / city.ground_texel
-    v = (y[m] - city.origin[1]) / city.ground_texel
-    out[m] = city.ground.sample(u, v, np.log2(foot[m] / city.ground_texel + 1e-12))
+    def lod(idx: np.ndarray, face_axis: int, texel: float) -> np.ndarray:
+        """log2 of the pixel footprint on the surface, in texels."""
+        cos = np.maximum(np.abs(dirs[idx, face_axis]), 0.05)
+        return np.log2(dist[idx] / (focal * texel * np.sqrt(cos)) + 1e-12)
 
-    safe = np.maximum(box, 0)
-    kind = np.where(box >= 0, city.kind[safe], -1)
-    lo = city.lo[safe]
-    uv = city.box_uv[safe, axis]  # (H, W, 2)
-    for face_axis, tex, texel in ((2, city.roof, city.roof_texel), (0, city.wall, city.wall_texel), (1, city.wall, city.wall_texel)):
-        m = (kind == BUILDING) & (axis == face_axis)
-        if not m.any():
+    idx = np.flatnonzero(box == GROUND)
+    u = (points[idx, 0] - city.origin[0]) / city.ground_texel
+    v = (points[idx, 1] - city.origin[1]) / city.ground_texel
+    out[idx] = city.ground.sample(u, v, lod(idx, 2, city.ground_texel))
+
+    on_box = np.flatnonzero(box >= 0)
+    kind = city.kind[box[on_box]]
+    out[on_box[kind == LAMP]] = city.lamp_colour
+    faces = ((2, city.roof, city.roof_texel), (0, city.wall, city.wall_texel), (1, city.wall, city.wall_texel))
+    for face_axis, tex, texel in faces:
+        idx = on_box[(kind == BUILDING) & (axis[on_box] == face_axis)]
+        if not len(idx):
             continue
+        b = box[idx]
+        x, y, z = points[idx, 0], points[idx, 1], points[idx, 2]
         if face_axis == 2:
-            u, v = (x[m] - lo[m][:, 0]) / texel, (y[m] - lo[m][:, 1]) / texel
+            u, v = (x - city.lo[b, 0]) / texel, (y - city.lo[b, 1]) / texel
         else:
             along = y if face_axis == 0 else x
-            u, v = (along[m] - lo[m][:, 1 - face_axis]) / texel, -z[m] / texel
-        colour = tex.sample(u + uv[m][:, 0], v + uv[m][:, 1], np.log2(foot[m] / texel + 1e-12))
-        out[m] = colour * city.box_gain[box[m]]
-    out[kind == LAMP] = city.lamp_colour
-    return out
+            u, v = (along - city.lo[b, 1 - face_axis]) / texel, -z / texel
+        offset = city.box_uv[b, face_axis]
+        out[idx] = tex.sample(u + offset[:, 0], v + offset[:, 1], lod(idx, face_axis, texel)) * city.box_gain[b]
+    return out.reshape(shape + (3,))

@@ -41,7 +41,8 @@ class Hits:
     """Nearest intersection of each pixel's ray, all arrays (H, W).
 
     Attributes:
-        t: distance along the unit ray (``inf`` for sky).
+        t: distance along the unit ray (``inf`` for sky); box hits have float32
+            precision (relative error ~1e-7).
         box: index of the box hit, ``GROUND`` or ``SKY``.
         axis: axis (0, 1, 2) of the face's normal; 2 for the ground.
         points: (H, W, 3) world points hit (undefined for sky).
@@ -96,7 +97,7 @@ def cast(
     origin = -R.T @ t
     dirs = pixel_rays(K, R, width, height)
     safe = np.where(np.abs(dirs) < 1e-12, 1e-12, dirs)
-    inv = [np.ascontiguousarray(1.0 / safe[..., a]) for a in range(3)]
+    inv = [np.ascontiguousarray(1.0 / safe[..., a], dtype=np.float32) for a in range(3)]  # float32: 2x faster
     best = np.full((height, width), np.inf)
     box = np.full((height, width), SKY, dtype=np.int32)
     axis = np.full((height, width), 2, dtype=np.int8)
@@ -112,8 +113,8 @@ def cast(
         slabs = []
         for a in range(3):
             iv = inv[a][r0:r1, c0:c1]
-            t1 = (lo[b, a] - origin[a]) * iv
-            t2 = (hi[b, a] - origin[a]) * iv
+            t1 = np.float32(lo[b, a] - origin[a]) * iv
+            t2 = np.float32(hi[b, a] - origin[a]) * iv
             slabs.append((np.minimum(t1, t2), np.maximum(t1, t2)))
         near = np.maximum(np.maximum(slabs[0][0], slabs[1][0]), slabs[2][0])
         far = np.minimum(np.minimum(slabs[0][1], slabs[1][1]), slabs[2][1])

@@ -98,7 +98,7 @@ class MipTexture:
         base = np.minimum(np.floor(lod).astype(np.int64), max(top - 1, 0))
         frac = (lod - base)[:, None].astype(np.float32)
         out = np.empty((len(u), 3), np.float32)
-        for level in np.unique(base):
+        for level in np.flatnonzero(np.bincount(base, minlength=1)):
             m = base == level
             a = self._bilinear(int(level), u[m], v[m])
             if level < top:
