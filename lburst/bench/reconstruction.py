@@ -1,0 +1,90 @@
+"""``lburst bench reconstruction``: every method on every scene, the paper's table.
+
+For each (method, scene) :func:`lburst.sfm.reconstruct_scene` runs in
+``OUT/<method>/<scene>/`` unless that folder already holds a finished ``result.json``
+of the same method (so an interrupted benchmark resumes; ``--force`` reruns).  The table
+(:mod:`lburst.sfm.metrics`: one row per method and scene, and each method's mean over
+scenes) is printed as markdown and written to ``OUT/table.md`` and ``OUT/results.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+from lburst.io import atomic_path
+
+
+def method_slug(spec: str) -> str:
+    """A folder name for a method spec: its readable characters plus a short hash (specs may hold paths)."""
+    readable = re.sub(r"[^A-Za-z0-9+._=-]+", "_", spec.replace("../", "")).strip("_")[-40:]
+    return f"{readable}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}"
+
+
+def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
+    """The table row of one method on one scene (from ``result.json`` when already done)."""
+    from lburst.sfm.reconstruct import RESULT_FILE, ReconstructionError, ReconstructionResult, reconstruct_scene
+
+    row: dict[str, Any] = {"method": spec, "scene": scene.name, "out": str(out)}
+    done = out / RESULT_FILE
+    if done.is_file() and not force:
+        previous = ReconstructionResult.load(done)
+        if previous.method == spec:
+            return {**row, **previous.metrics, "registered": len(previous.registered), "error": previous.error}
+    try:
+        result = reconstruct_scene(scene, spec, out, **options)
+    except ReconstructionError as err:
+        print(f"{spec} on {scene}: {err}", file=sys.stderr)
+        return {**row, "converged": 0.0, "error": str(err)}
+    if result.error:
+        print(f"{spec} on {scene}: {result.error}", file=sys.stderr)
+    return {**row, **result.metrics, "registered": len(result.registered), "error": result.error}
+
+
+def run_benchmark(scenes: list[str | Path], methods: list[str], out_dir: str | Path, force: bool = False,
+                  **options: Any) -> dict[str, Any]:
+    """Run every method on every scene; return ``{"rows": [...], "means": [...]}`` (also written to ``OUT/results.json``)."""
+    from lburst.sfm.metrics import aggregate
+
+    out_dir = Path(out_dir)
+    rows = []
+    for spec in methods:
+        for scene in map(Path, scenes):
+            rows.append(run_one(scene, spec, out_dir / method_slug(spec) / scene.name, force, options))
+    means = [{"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
+             for spec in methods]
+    report = {"scenes": [str(s) for s in scenes], "methods": methods, "options": options, "rows": rows, "means": means}
+    with atomic_path(out_dir / "results.json") as tmp:
+        tmp.write_text(json.dumps(report, indent=1))
+    return report
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scenes", nargs="+", help="scene folders (see lburst reconstruct)")
+    parser.add_argument("--methods", nargs="+", default=["sift", "merge+sift", "lburst"], help="method specs")
+    parser.add_argument("--out", required=True, help="output folder: OUT/<method>/<scene>/, table.md, results.json")
+    parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto")
+    parser.add_argument("--overlap", type=int, default=10)
+    parser.add_argument("--fallback-exhaustive", action="store_true")
+    parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
+    parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")
+
+
+def main(args: argparse.Namespace) -> int:
+    from lburst.sfm.metrics import markdown_table
+
+    report = run_benchmark(args.scenes, args.methods, args.out, force=args.force, pairs=args.pairs,
+                           overlap=args.overlap, fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
+                           camera=args.camera, num_threads=args.threads)
+    table = markdown_table(report["rows"] + report["means"])
+    with atomic_path(Path(args.out) / "table.md") as tmp:
+        tmp.write_text(table + "\n")
+    print(table)
+    return 0

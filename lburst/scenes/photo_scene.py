@@ -1,0 +1,143 @@
+"""``lburst simulate scene``: a burst scene from a multi-view photo set, with reference poses.
+
+Each photo ``PHOTOS/<name>.jpg`` becomes the burst ``SCENE/<name>/frame_000.png ...``
+(:func:`lburst.simulate.simulate_burst`: in-burst motion and noise, seeded by
+``stable_seed(seed, name)`` so each photo's burst is the same whatever the others are);
+the middle frame keeps the photo's pixel grid, so the photo's camera is the burst's.
+
+The reference poses are the reconstruction of the *clean* photos with SIFT through
+:func:`lburst.sfm.reconstruct_scene` (files in ``SCENE/.reference/``), stored as
+``SCENE/reference.json`` with source ``'sift-clean'``: poses of the registered photos,
+their refined cameras in ``cameras`` (per image, exact COLMAP model), ``camera`` the
+first one as a ``PINHOLE`` approximation (its distortion dropped), and ``length`` the
+path length through the camera centres in scene order (model units).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from lburst.scenes.reference import Reference
+from lburst.sfm.poses import path_length
+from lburst.sfm.scene import SceneError, list_scene, read_image, save_reference
+
+REFERENCE_METHOD = "sift"
+REFERENCE_SOURCE = "sift-clean"
+REFERENCE_DIR = ".reference"
+
+
+def frame_name(k: int) -> str:
+    return f"frame_{k:03d}.png"
+
+
+def write_burst(folder: Path, burst: np.ndarray) -> None:
+    """Write the frames of ``burst`` (N, H, W, 3) RGB into ``folder`` all at once (a temp folder renamed)."""
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}."))
+    try:
+        for k, frame in enumerate(burst):
+            if not cv2.imwrite(str(tmp / frame_name(k)), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)):
+                raise OSError(f"cannot write {tmp / frame_name(k)}")
+        shutil.rmtree(folder, ignore_errors=True)
+        tmp.rename(folder)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def burst_done(folder: Path, frames: int) -> bool:
+    return all((folder / frame_name(k)).is_file() for k in range(frames)) and not (folder / frame_name(frames)).exists()
+
+
+def pinhole(camera: dict) -> dict:
+    """A ``PINHOLE`` approximation (distortion dropped) of a COLMAP camera dict."""
+    model, p = camera["model"], [float(v) for v in camera["params"]]
+    if model in ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE"):
+        fx = fy = p[0]
+        cx, cy = p[1], p[2]
+    else:  # PINHOLE, OPENCV, FULL_OPENCV, ...: fx, fy, cx, cy first
+        fx, fy, cx, cy = p[:4]
+    return {"model": "PINHOLE", "width": int(camera["width"]), "height": int(camera["height"]), "params": [fx, fy, cx, cy]}
+
+
+def make_reference(photos: Path, scene_dir: Path, progress: bool = True, **options) -> Reference | None:
+    """Reconstruct the clean photos with SIFT and save ``scene_dir/reference.json``; ``None`` if nothing registered."""
+    from lburst.sfm.reconstruct import reconstruct_scene
+
+    result = reconstruct_scene(photos, REFERENCE_METHOD, scene_dir / REFERENCE_DIR, progress=progress, **options)
+    if not result.registered:
+        return None
+    order = [n for n in result.names if n in result.poses]
+    poses = {n: result.poses[n] for n in order}
+    centres = np.array([-R.T @ t for R, t in poses.values()])
+    reference = Reference(REFERENCE_SOURCE, pinhole(result.cameras[order[0]]), poses, path_length(centres))
+    save_reference(reference, scene_dir / "reference.json", {n: result.cameras[n] for n in order})
+    return reference
+
+
+def simulate_scene(photos: str | Path, out: str | Path, frames: int = 5, motion_px: float = 2.0,
+                   noise: str | None = "gaussian:50", seed: int = 0, reference: bool = True,
+                   progress: bool = True) -> Reference | None:
+    """Write the burst scene of ``photos`` into ``out`` (module docstring); returns the reference (or ``None``).
+
+    Bursts already written with ``frames`` frames are kept (a re-run resumes).
+    """
+    from lburst.noise import noise_from_spec
+    from lburst.simulate import random_motion, simulate_burst, stable_seed
+
+    photos, out = Path(photos), Path(out)
+    items = [item for item in list_scene(photos).items if item.kind == "image"]
+    if not items:
+        raise SceneError(f"{photos}: no photos found")
+    noise_model = noise_from_spec(noise) if noise and noise != "none" else None
+    for item in tqdm(items, desc="bursts", disable=not progress, leave=False):
+        folder = out / item.name
+        if burst_done(folder, frames):
+            continue
+        rng = np.random.default_rng(stable_seed(seed, item.name))
+        motion = random_motion(rng, motion_px)
+        burst = simulate_burst(read_image(item.path), frames=frames, motion=motion, noise=noise_model, rng=rng)
+        write_burst(folder, burst)
+    if not reference:
+        return None
+    if (out / "reference.json").is_file():
+        existing = Reference.load(out / "reference.json")
+        if existing.source == REFERENCE_SOURCE:
+            return existing
+    return make_reference(photos, out, progress)
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("photos", help="folder of photos of one scene (natural order = trajectory order)")
+    parser.add_argument("--out", required=True, help="scene folder to write")
+    parser.add_argument("--frames", type=int, default=5, help="frames per burst (odd)")
+    parser.add_argument("--motion-px", type=float, default=2.0, help="largest in-burst motion, pixels per frame")
+    parser.add_argument("--noise", default="gaussian:50", help="noise spec (lburst.noise), or 'none'")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-reference", action="store_true", help="skip the clean SIFT reconstruction")
+
+
+def main(args: argparse.Namespace) -> int:
+    from lburst.sfm.reconstruct import ReconstructionError
+
+    try:
+        ref = simulate_scene(args.photos, args.out, args.frames, args.motion_px, args.noise, args.seed,
+                             reference=not args.no_reference)
+    except (SceneError, ReconstructionError, ValueError) as err:
+        print(f"lburst simulate scene: {err}", file=sys.stderr)
+        return 1
+    if not args.no_reference:
+        if ref is None:
+            print(f"lburst simulate scene: the clean photos did not reconstruct; {args.out} has no reference",
+                  file=sys.stderr)
+            return 1
+        print(f"reference: {len(ref.poses)} photos registered ({REFERENCE_SOURCE}) in {Path(args.out) / 'reference.json'}")
+    print(f"scene written to {args.out}")
+    return 0

@@ -1,0 +1,78 @@
+"""The COLMAP database import (exact read-back) and the reference epipolar distance."""
+
+import numpy as np
+import pytest
+
+from lburst.sfm.colmap import ColmapJob, default_camera, pycolmap, read_inliers, write_database
+from lburst.sfm.metrics import epipolar_distances
+
+
+def small_job(tmp_path):
+    rng = np.random.default_rng(0)
+    names = ["a", "b", "c"]
+    keypoints = [rng.uniform(0, 300, size=(k, 2)).astype(np.float32) for k in (50, 40, 30)]
+    keypoints[0][0] = (0.0, 0.0)  # the centre of the top-left pixel
+    pairs = np.array([[0, 1], [0, 2], [1, 2]])
+    matches = [np.stack([rng.permutation(ka)[:m], rng.permutation(kb)[:m]], 1)
+               for (ka, kb), m in zip([(50, 40), (50, 30), (40, 30)], (20, 10, 0))]
+    cams = [default_camera(320, 240), default_camera(320, 240, "PINHOLE", focal=300.0)]
+    job = ColmapJob(names, str(tmp_path / "images"), cams, [0, 1, 0])
+    return job, keypoints, pairs, matches
+
+
+def test_database_import_reads_back_exactly(tmp_path):
+    job, keypoints, pairs, matches = small_job(tmp_path)
+    db_path = tmp_path / "database.db"
+    ids = write_database(db_path, job, keypoints, pairs, matches)
+    with pycolmap.Database.open(str(db_path)) as db:
+        assert db.num_images() == 3 and db.num_frames() == 3 and db.num_cameras() == 2
+        for name, image_id, kp, cam in zip(job.names, ids, keypoints, job.camera_of_image):
+            image = db.read_image(image_id)
+            assert image.name == f"{name}.png"
+            stored = db.read_keypoints(image_id)
+            assert stored.shape == kp.shape
+            np.testing.assert_array_equal(stored, kp + np.float32(0.5))  # COLMAP's pixel convention
+            camera = db.read_camera(image.camera_id)
+            assert camera.model.name == job.cameras[cam]["model"]
+            np.testing.assert_array_equal(camera.params, job.cameras[cam]["params"])
+        assert db.read_keypoints(ids[0])[0].tolist() == [0.5, 0.5]
+        for (a, b), m in zip(pairs, matches):
+            np.testing.assert_array_equal(db.read_matches(ids[a], ids[b]), m.astype(np.uint32))
+
+
+def test_database_import_rejects_what_colmap_would_abort_on(tmp_path):
+    job, keypoints, pairs, matches = small_job(tmp_path)
+    bad_kp = [np.c_[keypoints[0], np.ones(50, np.float32)]] + keypoints[1:]  # (K, 3)
+    with pytest.raises(ValueError, match="must be \\(K, 2\\)"):
+        write_database(tmp_path / "x.db", job, bad_kp, pairs, matches)
+    bad_matches = [np.array([[0, 40]])] + matches[1:]  # image b has 40 keypoints: index 40 does not exist
+    with pytest.raises(ValueError, match="index missing keypoints"):
+        write_database(tmp_path / "y.db", job, keypoints, pairs, bad_matches)
+
+
+def test_read_inliers_orders_pairs_by_image(tmp_path):
+    job, keypoints, pairs, matches = small_job(tmp_path)
+    db_path = tmp_path / "database.db"
+    ids = write_database(db_path, job, keypoints, pairs, matches)
+    geometry = pycolmap.TwoViewGeometry()
+    geometry.config = pycolmap.TwoViewGeometryConfiguration.CALIBRATED
+    geometry.inlier_matches = matches[0][:5].astype(np.uint32)
+    with pycolmap.Database.open(str(db_path)) as db:
+        db.write_two_view_geometry(ids[0], ids[1], geometry)
+    v_pairs, inliers = read_inliers(db_path, ids)
+    assert v_pairs.tolist() == [[0, 1]]
+    np.testing.assert_array_equal(inliers[0], matches[0][:5])
+
+
+def test_epipolar_distance_of_a_rectified_pair():
+    # two pinhole cameras 1 m apart along x: epipolar lines are the image rows
+    camera = {"model": "PINHOLE", "width": 640, "height": 480, "params": [500.0, 500.0, 320.0, 240.0]}
+    pose_a = (np.eye(3), np.zeros(3))
+    pose_b = (np.eye(3), np.array([-1.0, 0.0, 0.0]))
+    points = np.array([[0.3, -0.2, 5.0], [-1.0, 0.5, 8.0], [0.0, 0.0, 3.0]])
+    project = lambda p, t: (p + t)[:, :2] / (p + t)[:, 2:] * 500 + [320, 240]  # noqa: E731
+    xa, xb = project(points, pose_a[1]), project(points, pose_b[1])
+    np.testing.assert_allclose(epipolar_distances(xa, xb, camera, camera, pose_a, pose_b), 0, atol=1e-9)
+    xb_moved = xb + [[0, 3.0], [7.0, 0.0], [0, -1.5]]  # off the row by 3 px; along it; off by 1.5 px
+    np.testing.assert_allclose(epipolar_distances(xa, xb_moved, camera, camera, pose_a, pose_b), [3.0, 0.0, 1.5],
+                               atol=1e-9)
