@@ -176,6 +176,9 @@ def test_rendering_is_deterministic_and_seeded():
     other = nf.render_burst(dataclasses.replace(cfg, seed=1), 1)
     assert np.abs(a.astype(int) - other).mean() > 10
     assert np.abs(a[0].astype(int) - a[2]).mean() > 2, "frames of a burst should differ"
+    dim = nf.render_burst(dataclasses.replace(cfg, exposure=0.25), 1)
+    unsaturated = a < 250
+    np.testing.assert_allclose(dim[unsaturated], a[unsaturated] * 0.25, atol=0.5 + 0.125)  # two roundings
 
 
 def test_noise_is_seeded_per_frame():

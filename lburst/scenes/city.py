@@ -95,7 +95,6 @@ def _lamps(bounds: np.ndarray, phase: np.ndarray, cfg: CityConfig) -> np.ndarray
     """(L, 2) lamp positions along one side of every street."""
     if cfg.lamp_spacing <= 0:
         return np.zeros((0, 2))
-    (x0, y0), (x1, y1) = bounds
     side = cfg.street_width - 1.0
     out = []
     for axis in (0, 1):

@@ -55,6 +55,7 @@ class NightFlightConfig:
         burst_spacing: distance flown between consecutive common frames.
         shake_deg: amplitude of the attitude wobble.
         supersample: render at this many times the resolution and area-average (anti-aliasing).
+        exposure: gain applied to the rendered image before noise and 8-bit rounding.
         noise: noise spec for :func:`lburst.noise.noise_from_spec` (``'none'``: clean).
         seed: seed of the city and of the noise.
         city: how the city looks (:data:`lburst.scenes.city.DAYLIGHT` for a day flight).
@@ -74,6 +75,7 @@ class NightFlightConfig:
     burst_spacing: float = 8.0
     shake_deg: float = 0.3
     supersample: int = 1
+    exposure: float = 1.0
     noise: str = "none"
     seed: int = 0
     city: CityConfig = field(default_factory=CityConfig)
@@ -225,14 +227,16 @@ def _noise(spec: str) -> Noise | None:
 
 
 def render_burst(cfg: NightFlightConfig, burst: int, city: City | None = None, noisy: bool = True) -> np.ndarray:
-    """Frames (F, H, W, 3) uint8 of ``burst``; noise from ``cfg.noise`` (seeded by the
-    config's seed, the burst and the frame) unless ``noisy`` is false."""
+    """Frames (F, H, W, 3) uint8 of ``burst``, scaled by ``cfg.exposure``; noise from
+    ``cfg.noise`` (seeded by the config's seed, the burst and the frame) unless ``noisy``
+    is false."""
     city = make_city(cfg) if city is None else city
     K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
     noise = _noise(cfg.noise) if noisy else None
     frames = []
     for k, (R, t) in enumerate(burst_poses(cfg, burst)):
         image, _ = render_view(city, K, R, t, cfg.width, cfg.height, cfg.supersample)
+        image *= cfg.exposure
         if noise is not None:
             image = noise(image, np.random.default_rng([cfg.seed, 1, burst, k]))
         frames.append(np.clip(np.round(image), 0, 255).astype(np.uint8))
@@ -240,13 +244,13 @@ def render_burst(cfg: NightFlightConfig, burst: int, city: City | None = None, n
 
 
 def clean_common_frames(cfg: NightFlightConfig, city: City | None = None) -> dict[str, np.ndarray]:
-    """Noise-free common (middle) frames, burst name -> (H, W, 3) uint8."""
+    """Noise-free common (middle) frames scaled by ``cfg.exposure``, burst name -> (H, W, 3) uint8."""
     city = make_city(cfg) if city is None else city
     K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
     out = {}
     for name, (R, t) in reference(cfg).poses.items():
         image, _ = render_view(city, K, R, t, cfg.width, cfg.height, cfg.supersample)
-        out[name] = np.clip(np.round(image), 0, 255).astype(np.uint8)
+        out[name] = np.clip(np.round(image * cfg.exposure), 0, 255).astype(np.uint8)
     return out
 
 
