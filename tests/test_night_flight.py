@@ -227,3 +227,16 @@ def test_bad_configuration_is_refused():
         nf.NightFlightConfig(frames_per_burst=4)
     with pytest.raises(ValueError, match="horizon"):
         nf.NightFlightConfig(pitch_deg=75)
+
+
+def test_command_line(tmp_path, capsys):
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    nf.configure_parser(parser)
+    out = tmp_path / "flight"
+    assert nf.main(parser.parse_args([str(out), "--bursts", "2", "--frames", "3", "--size", "48x32", "--daylight"])) == 0
+    assert Reference.load(out / "reference.json").camera["width"] == 48
+    assert len(list((out / "0001").glob("frame_*.png"))) == 3
+    assert nf.main(parser.parse_args([str(out), "--frames", "4"])) == 2
+    assert "odd" in capsys.readouterr().err
