@@ -30,6 +30,7 @@ converge contributes 0 registered images and 0 points, and no trajectory error
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -139,16 +140,22 @@ def reference_length(reference: Reference, order: list[str]) -> float:
     return path_length(np.array([centres[n] for n in order if n in centres]))
 
 
-def evaluate_against_reference(result: "ReconstructionResult", reference: Reference,
+def evaluate_against_reference(result: "ReconstructionResult", reference: Reference | str | Path,
                                cameras: dict[str, dict] | None = None,
                                threshold: float = PRECISION_THRESHOLD_PX) -> dict[str, Any]:
     """Trajectory errors and match precision of ``result`` against ``reference`` (module docstring).
 
-    ``cameras`` maps image names to reference camera dicts (default: ``reference.camera``
-    for every image).  Returns ``precision``, ``precision_matches``, ``ate_*``, ``rpe_*``,
-    ``num_poses`` (keys absent when they cannot be computed, e.g. fewer than 3 common
-    registered images).
+    ``reference`` is a :class:`Reference` or the path of a ``reference.json`` (whose
+    per-image ``cameras`` are then used).  ``cameras`` maps image names to reference
+    camera dicts (default: those of the file, else ``reference.camera`` for every image).
+    Returns ``precision``, ``precision_matches``, ``ate_*``, ``rpe_*``, ``num_poses``
+    (keys absent when they cannot be computed, e.g. fewer than 3 common registered images).
     """
+    if not isinstance(reference, Reference):
+        from lburst.sfm.scene import reference_cameras
+
+        cameras = cameras or reference_cameras(reference)
+        reference = Reference.load(reference)
     cameras = cameras or {name: reference.camera for name in reference.poses}
     out: dict[str, Any] = {"reference_source": reference.source}
     data = result.match_data()

@@ -280,8 +280,7 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
         result.cameras[name] = image["camera"]
     result.registered.sort(key=scene.names.index)
     if scene.reference_path is not None and not result.error:
-        result.metrics.update(evaluate_against_reference(result, scene.reference(),
-                                                         reference_cameras(scene.reference_path)))
+        result.metrics.update(evaluate_against_reference(result, scene.reference_path))
     result.save()
     return result
 
