@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
@@ -86,20 +87,39 @@ class LBurst:
         feats["keypoints"]                    # (K, 2) float32, x, y
     """
 
-    def __init__(self, net: LBurstNet, device: str | torch.device = "cpu", frame_order: str = "temporal") -> None:
+    def __init__(
+        self,
+        net: LBurstNet | None,
+        device: str | torch.device = "cpu",
+        frame_order: str = "temporal",
+        runner: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor]] | None = None,
+        frames: int | None = None,
+    ) -> None:
+        """``net``: the network; or ``runner`` (with ``frames``): any callable with the
+        signature of :meth:`lburst.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session."""
+        if net is None and runner is None:
+            raise ValueError("give a network or a runner")
         self.device = torch.device(device)
-        self.net = net.eval().to(self.device)
-        self.frames = net.config.frames
+        self.net = net.eval().to(self.device) if net is not None else None
+        self.frames = net.config.frames if net is not None else int(frames)
         self.frame_order = frame_order
         self._perm = frame_permutation(self.frames, frame_order)
-        self._fast: FastLBurstNet | None = None
+        self._runner = runner
 
     @property
-    def fast_net(self) -> FastLBurstNet:
-        """The inference-only form of the network (built on first use)."""
-        if self._fast is None:
-            self._fast = FastLBurstNet(self.net).to(self.device).eval()
-        return self._fast
+    def fast_net(self) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+        """The fast form of the network (built on first use): ``x -> (rep, rel, half)``."""
+        if self._runner is None:
+            self._runner = FastLBurstNet(self.net).to(self.device).eval()
+        return self._runner
+
+    @classmethod
+    def from_onnx(cls, path: str | Path, frame_order: str = "temporal", threads: int | None = None) -> "LBurst":
+        """Run a model exported by ``lburst export onnx`` with ONNX Runtime (CPU)."""
+        from lburst.export_onnx import OnnxRunner
+
+        runner = OnnxRunner(path, threads=threads)
+        return cls(None, "cpu", frame_order, runner=runner, frames=runner.frames)
 
     @classmethod
     def from_checkpoint(
@@ -138,11 +158,15 @@ class LBurst:
         Returns ``descriptors`` (H, W, D), ``repeatability`` (H, W) and
         ``reliability`` (H, W), float32 NumPy arrays.
         """
-        out = self.net(self._input(burst))
+        x = self._input(burst)
+        rep, rel, half = self.fast_net(x)
+        desc = F.normalize(F.interpolate(half, scale_factor=2.0, mode="bilinear", align_corners=False), dim=1)
+        h, w = x.shape[-2:]
+        desc = F.pad(desc, (0, w - desc.shape[-1], 0, h - desc.shape[-2]), mode="replicate")
         return {
-            "descriptors": out["descriptors"][0].permute(1, 2, 0).float().cpu().numpy(),
-            "repeatability": out["repeatability"][0, 0].float().cpu().numpy(),
-            "reliability": out["reliability"][0, 0].float().cpu().numpy(),
+            "descriptors": desc[0].permute(1, 2, 0).float().cpu().numpy(),
+            "repeatability": rep[0, 0].float().cpu().numpy(),
+            "reliability": rel[0, 0].float().cpu().numpy(),
         }
 
     @torch.inference_mode()
@@ -166,7 +190,7 @@ class LBurst:
         while s + 0.001 >= max(cfg.min_scale, cfg.min_size / long_side):
             if s - 0.001 <= min(cfg.max_scale, cfg.max_size / long_side):
                 h, w = x.shape[-2:]
-                if cfg.fast:
+                if cfg.fast or self.net is None:
                     rep, rel, half = self.fast_net(x)
                     y, xx = _local_maxima(rep, rel, cfg)
                     descs.append(descriptors_at(half, y, xx))

@@ -87,12 +87,13 @@ class FastLBurstNet(nn.Module):
         right = proj(p[:, :, :-1], p[:, :, 1:])  # (h+2, w+1)
         down = proj(p[:, :-1, :], p[:, 1:, :])  # (h+1, w+2)
         cross = proj(p[:, :-1, :-1], p[:, 1:, 1:]) + proj(p[:, :-1, 1:], p[:, 1:, :-1])  # diagonals (h+1, w+1)
-        out = half.new_empty(bsz, h, 2, w, 2, 3)
+        rows = []
         for py, (a0, a1) in enumerate(_PARITY_WEIGHTS):
             r, r1 = slice(py, py + h), slice(py + 1, py + 1 + h)
+            cols = []
             for px, (b0, b1) in enumerate(_PARITY_WEIGHTS):
                 c, c1 = slice(px, px + w), slice(px + 1, px + 1 + w)
-                out[:, :, py, :, px] = (
+                cols.append(
                     (a0 * b0) ** 2 * s[:, r, c]
                     + (a0 * b1) ** 2 * s[:, r, c1]
                     + (a1 * b0) ** 2 * s[:, r1, c]
@@ -103,22 +104,42 @@ class FastLBurstNet(nn.Module):
                     + 2 * a0 * a1 * b1 * b1 * down[:, r, c1]
                     + 2 * a0 * a1 * b0 * b1 * cross[:, r, c]
                 )
+            rows.append(torch.stack(cols, dim=3))  # (B, h, w, 2, 3): column parity
+        out = torch.stack(rows, dim=2)  # (B, h, 2, w, 2, 3): output pixel (2m + py, 2n + px)
         out = out.reshape(bsz, 2 * h, 2 * w, 3) + self.head_bias
         return out.permute(0, 3, 1, 2)
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``(repeatability, reliability, half)``: maps (B, 1, H, W) and the raw half map."""
-        height, width = x.shape[-2:]
+    def core(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(repeatability, reliability, half)`` at the network's output size ``2 * (H // 2)``."""
         half = self.raw(x)
         pre = self._heads(half)
         sal = F.softplus(pre[:, :1])
-        repeatability = sal / (1 + sal)
-        reliability = torch.softmax(pre[:, 1:], dim=1)[:, 1:2]
-        pad_w, pad_h = width - pre.shape[-1], height - pre.shape[-2]
-        if pad_w or pad_h:
-            repeatability = F.pad(repeatability, (0, pad_w, 0, pad_h))
-            reliability = F.pad(reliability, (0, pad_w, 0, pad_h))
-        return repeatability, reliability, half
+        return sal / (1 + sal), torch.softmax(pre[:, 1:], dim=1)[:, 1:2], half
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(repeatability, reliability, half)``: maps (B, 1, H, W) and the raw half map."""
+        repeatability, reliability, half = self.core(x)
+        return pad_maps(repeatability, reliability, x.shape[-2:]) + (half,)
+
+
+class CoreModule(nn.Module):
+    """:meth:`FastLBurstNet.core` as a module (what ``lburst export onnx`` exports)."""
+
+    def __init__(self, fast: FastLBurstNet) -> None:
+        super().__init__()
+        self.fast = fast
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        return self.fast.core(x)
+
+
+def pad_maps(repeatability: torch.Tensor, reliability: torch.Tensor, size) -> tuple[torch.Tensor, torch.Tensor]:
+    """Zero-pad maps one pixel short along odd input dimensions (see :mod:`lburst.model`)."""
+    pad_h, pad_w = size[0] - repeatability.shape[-2], size[1] - repeatability.shape[-1]
+    if pad_w or pad_h:
+        repeatability = F.pad(repeatability, (0, pad_w, 0, pad_h))
+        reliability = F.pad(reliability, (0, pad_w, 0, pad_h))
+    return repeatability, reliability
 
 
 def descriptors_at(half: torch.Tensor, y: torch.Tensor, x: torch.Tensor) -> torch.Tensor:

@@ -1,0 +1,89 @@
+"""ONNX export of the fast network and an ONNX Runtime backend (``lburst export onnx``).
+
+The exported graph is :meth:`lburst.fast.FastLBurstNet.core`: input ``burst``
+``(1, 3N, H, W)`` (normalised, see :func:`lburst.model.normalize_burst`) with dynamic
+height and width; outputs ``repeatability`` and ``reliability`` ``(1, 1, 2*(H//2),
+2*(W//2))`` and ``half``, the raw half-resolution map.  :class:`OnnxRunner` pads odd
+sizes exactly as the torch path does, so :class:`lburst.LBurst` runs either.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lburst.fast import CoreModule, FastLBurstNet, pad_maps
+from lburst.io import atomic_path
+from lburst.model import CheckpointError, load_checkpoint
+
+
+def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Path:
+    """Export the checkpoint's fast network to ``out`` (atomically)."""
+    net, _ = load_checkpoint(checkpoint, "cpu")
+    core = CoreModule(FastLBurstNet(net).eval()).eval()
+    example = torch.randn(1, net.config.in_channels, 96, 128)
+    height, width = torch.export.Dim("height", min=32, max=8192), torch.export.Dim("width", min=32, max=8192)
+    out = Path(out)
+    with atomic_path(out) as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(core, (example,), str(tmp), dynamo=True, opset_version=opset, input_names=["burst"],
+                          output_names=["repeatability", "reliability", "half"],
+                          dynamic_shapes={"x": {2: height, 3: width}}, external_data=False, verbose=False)
+    return out
+
+
+class OnnxRunner:
+    """An ONNX Runtime session with the interface of :meth:`FastLBurstNet.forward`."""
+
+    def __init__(self, path: str | Path, threads: int | None = None) -> None:
+        import onnxruntime as ort
+
+        path = Path(path)
+        if not path.is_file():
+            raise CheckpointError(f"{path}: ONNX model not found")
+        options = ort.SessionOptions()
+        if threads:
+            options.intra_op_num_threads = threads
+        try:
+            self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+        except Exception as exc:
+            raise CheckpointError(f"{path}: not a readable ONNX model ({exc})") from exc
+        channels = self.session.get_inputs()[0].shape[1]
+        if not isinstance(channels, int) or channels % 3:
+            raise CheckpointError(f"{path}: input has {channels} channels, not 3N")
+        self.frames = channels // 3
+
+    def __call__(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        arrays = self.session.run(None, {"burst": x.contiguous().cpu().numpy()})
+        rep, rel, half = (torch.from_numpy(a) for a in arrays)
+        return pad_maps(rep, rel, x.shape[-2:]) + (half,)
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    p.add_argument("checkpoint", help="checkpoint to export (lburst or published layout)")
+    p.add_argument("--out", type=Path, required=True, help="ONNX file to write")
+    p.add_argument("--opset", type=int, default=18)
+    p.add_argument("--check", action="store_true", help="compare ONNX Runtime with torch on a random burst")
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        out = export_onnx(args.checkpoint, args.out, args.opset)
+    except CheckpointError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}")
+    if args.check:
+        net, _ = load_checkpoint(args.checkpoint, "cpu")
+        x = torch.randn(1, net.config.in_channels, 123, 166)
+        with torch.inference_mode():
+            ref = FastLBurstNet(net)(x)
+        got = OnnxRunner(out)(x)
+        err = max(float((a - b).abs().max()) for a, b in zip(got, ref))
+        print(f"max abs difference to torch on a 166x123 input: {err:.2e}")
+    return 0

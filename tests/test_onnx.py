@@ -1,0 +1,50 @@
+"""ONNX export and the ONNX Runtime backend agree with the torch network."""
+
+import numpy as np
+import pytest
+import torch
+
+pytest.importorskip("onnxruntime")
+
+from lburst.export_onnx import OnnxRunner, export_onnx  # noqa: E402
+from lburst.extract import LBurst  # noqa: E402
+from lburst.fast import FastLBurstNet  # noqa: E402
+from lburst.model import CheckpointError, LBurstNet, NetConfig, save_checkpoint  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("onnx")
+    torch.manual_seed(0)
+    net = LBurstNet(NetConfig(frames=3)).eval()
+    save_checkpoint(net, folder / "net.pt")
+    return net, export_onnx(folder / "net.pt", folder / "net.onnx")
+
+
+@pytest.mark.parametrize("size", [(96, 128), (75, 131)])
+def test_onnx_runtime_matches_torch_at_any_size(exported, size):
+    net, path = exported
+    x = torch.randn(1, 9, *size)
+    with torch.inference_mode():
+        ref = FastLBurstNet(net)(x)
+    got = OnnxRunner(path)(x)
+    for a, b in zip(got, ref):
+        assert a.shape == b.shape
+        torch.testing.assert_close(a, b, atol=1e-5, rtol=0)
+
+
+def test_onnx_model_extracts_through_lburst(exported):
+    net, path = exported
+    burst = np.random.default_rng(0).integers(0, 256, (3, 70, 90, 3), dtype=np.uint8)
+    model = LBurst.from_onnx(path)
+    assert model.frames == 3
+    dense_onnx, dense_torch = model.dense(burst), LBurst(net).dense(burst)
+    for key in dense_torch:
+        np.testing.assert_allclose(dense_onnx[key], dense_torch[key], atol=1e-5)
+
+
+def test_bad_onnx_file_is_a_clear_error(tmp_path):
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"nope")
+    with pytest.raises(CheckpointError, match="bad.onnx"):
+        OnnxRunner(bad)
