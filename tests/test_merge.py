@@ -1,0 +1,102 @@
+"""Burst with Merge: shift estimation against known motion, exact merging, MergeThen."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from skimage import data
+
+from lburst.features import check_features
+from lburst.methods import create
+from lburst.methods.align import estimate_shifts, fit_linear
+from lburst.methods.merge import MergeThen, merge_burst
+
+cv2.setNumThreads(1)
+VELOCITY = np.array([1.37, -0.62])
+
+
+def moving_burst(velocity, noise: float, frames: int = 5, size: int = 320, seed: int = 0) -> np.ndarray:
+    """Photo moving at ``velocity`` px/frame: frame k shows the scene at p + t_k * velocity (bilinear)."""
+    rng = np.random.default_rng(seed)
+    photo = data.astronaut()[60 : 60 + size + 32, 80 : 80 + size + 32].astype(np.float32)
+    out = []
+    for t in np.arange(frames) - frames // 2:
+        m = np.float32([[1, 0, t * velocity[0]], [0, 1, t * velocity[1]]])
+        moved = cv2.warpAffine(photo, m, photo.shape[1::-1], flags=cv2.INTER_LINEAR)[16:-16, 16:-16]
+        out.append(np.clip(np.rint(moved + rng.normal(0, noise, moved.shape)), 0, 255).astype(np.uint8))
+    return np.stack(out)
+
+
+@pytest.mark.parametrize("noise", [0.0, 25.0])
+@pytest.mark.parametrize("method", ["phase", "ecc"])
+def test_shifts_within_a_tenth_of_a_pixel(noise, method):
+    burst = moving_burst(VELOCITY, noise)
+    truth = (np.arange(5) - 2)[:, None] * VELOCITY
+    shifts = estimate_shifts(burst, method=method)
+    assert shifts.shape == (5, 2)
+    np.testing.assert_array_equal(shifts[2], [0, 0])
+    assert np.abs(shifts - truth).max() < 0.1
+    linear = estimate_shifts(burst, method=method, motion="linear")
+    assert np.abs(linear - truth).max() < 0.1
+
+
+def test_linear_fit_is_least_squares_through_zero():
+    shifts = np.array([[-2.2, 1.0], [-1.0, 0.4], [0.0, 0.0], [0.8, -0.6], [2.0, -1.0]])
+    u = (2 * 2.2 + 1.0 + 0.8 + 2 * 2.0) / 10  # sum t * dx / sum t^2
+    v = (-2 * 1.0 - 0.4 - 0.6 - 2 * 1.0) / 10
+    np.testing.assert_allclose(fit_linear(shifts), (np.arange(5) - 2)[:, None] * [u, v])
+
+
+def test_oracle_merge_of_whole_pixel_motion_is_exact():
+    burst = moving_burst((2.0, 1.0), 0.0)
+    shifts = (np.arange(5) - 2)[:, None] * np.array([2.0, 1.0])
+    merged = merge_burst(burst, shifts)
+    assert merged.dtype == np.float32 and merged.shape == burst.shape[1:]
+    np.testing.assert_allclose(merged[5:-5, 5:-5], burst[2, 5:-5, 5:-5], atol=1e-4)
+
+
+def test_border_pixels_average_only_the_frames_that_cover_them():
+    burst = np.stack([np.full((8, 10, 3), 10 * (k + 1), np.uint8) for k in range(3)])
+    shifts = np.array([[3.0, 0.0], [0.0, 0.0], [0.0, 0.0]])  # frame 0 covers columns 0..6 only
+    merged = merge_burst(burst, shifts)
+    np.testing.assert_allclose(merged[:, :7], 20.0)  # (10 + 20 + 30) / 3
+    np.testing.assert_allclose(merged[:, 7:], 25.0)  # (20 + 30) / 2
+    np.testing.assert_allclose(merge_burst(burst, shifts, reduce="median")[:, 7:], 25.0)
+
+
+def test_mean_averages_noise_and_median_rejects_an_outlier_frame():
+    rng = np.random.default_rng(1)
+    flat = np.clip(rng.normal(128, 20, (5, 64, 64, 3)), 0, 255).astype(np.uint8)
+    merged = merge_burst(flat, np.zeros((5, 2)))
+    assert merged.std() == pytest.approx(flat.std() / np.sqrt(5), rel=0.1)
+    bright = np.full((5, 16, 16, 3), 100, np.uint8)
+    bright[0] = 255
+    assert np.all(merge_burst(bright, np.zeros((5, 2)), reduce="median") == 100)
+
+
+def test_merge_then_runs_the_inner_method_on_the_merged_image():
+    burst = moving_burst(VELOCITY, 25.0)
+    truth = (np.arange(5) - 2)[:, None] * VELOCITY
+    extractor = create("merge+sift")
+    assert isinstance(extractor, MergeThen) and extractor.name == "merge+sift"
+    feats = check_features(extractor(burst, shifts=truth))
+    merged = np.clip(np.rint(merge_burst(burst, truth)), 0, 255).astype(np.uint8)
+    direct = create("sift")(merged[None])
+    np.testing.assert_array_equal(feats["keypoints"], direct["keypoints"])
+    estimated = check_features(extractor(burst))
+    assert len(estimated["keypoints"]) > 0.8 * len(feats["keypoints"])
+    wide = check_features(create("merge+orb")(burst.astype(np.uint16) * 257))
+    assert wide["descriptors"].dtype == np.uint8
+
+
+def test_bad_arguments():
+    burst = moving_burst(VELOCITY, 0.0, size=64)
+    with pytest.raises(ValueError, match=r"shifts must be \(5, 2\)"):
+        merge_burst(burst, np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="reduction"):
+        merge_burst(burst, np.zeros((5, 2)), reduce="max")
+    with pytest.raises(ValueError, match="alignment method"):
+        estimate_shifts(burst, method="sift")
+    with pytest.raises(ValueError, match="motion model"):
+        estimate_shifts(burst, motion="affine")
