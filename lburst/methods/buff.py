@@ -63,6 +63,8 @@ class BuffConfig:
         contrast_threshold: SIFT's (on [0, 1] images): reject |DoG| * layers below it.
         edge_threshold: reject principal-curvature ratios above it.
         max_features: keep the strongest (by contrast) after orientation assignment.
+        min_slope_sharpness: drop keypoints whose slope is not sharply defined (see
+            ``Buff._subslope``; 0 keeps all, about 0.01 drops most edge-like and coarse ones).
     """
 
     slope_min: float = -2.0
@@ -76,6 +78,7 @@ class BuffConfig:
     contrast_threshold: float = 0.04
     edge_threshold: float = 10.0
     max_features: int = 5000
+    min_slope_sharpness: float = 0.0
 
     def slope_grid(self) -> tuple[np.ndarray, tuple[int, ...]]:
         """Slopes ``(S, 2)`` (u, v) px/frame and the grid's shape (``(n,)`` 1-D, ``(nv, nu)`` 2-D, u fastest)."""
@@ -185,6 +188,10 @@ class Buff:
         keep = np.nonzero(alive)[0]
         lvl, y, x, best, offset, contrast = lvl[keep], y[keep], x[keep], best[keep], offset[keep], contrast[keep]
         slopes, sharpness = self._subslope(octv, lvl, y, x, best, shifts)
+        if cfg.min_slope_sharpness > 0:
+            sharp = sharpness >= cfg.min_slope_sharpness
+            lvl, y, x, offset, contrast = lvl[sharp], y[sharp], x[sharp], offset[sharp], contrast[sharp]
+            slopes, sharpness, keep = slopes[sharp], sharpness[sharp], keep[sharp]
         return {"x": x + offset[:, 0], "y": y + offset[:, 1], "level": lvl, "sublevel": offset[:, 2],
                 "contrast": np.abs(contrast), "slope": slopes, "octave": np.full(len(keep), octv.index), "sharpness": sharpness,
                 "gauss": octv.gauss}
@@ -375,7 +382,7 @@ def _derivatives(cube: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 _CONVERTERS = {
     "slope_min": float, "slope_max": float, "slope_step": float, "direction": lambda v: as_floats(v, 2),
     "sigma": float, "init_sigma": float, "layers": int, "octaves": int, "contrast_threshold": float,
-    "edge_threshold": float, "max_features": int,
+    "edge_threshold": float, "max_features": int, "min_slope_sharpness": float,
 }
 
 
