@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
+
+import cv2
+import numpy as np
 
 
 @contextlib.contextmanager
@@ -26,3 +30,161 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+class BurstError(ValueError):
+    """A burst that cannot be read; the message names the file and the problem."""
+
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".pnm", ".webp")
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg")
+
+
+def natural_key(path: Path) -> list:
+    """Sort key that orders ``f2`` before ``f10``."""
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """An image file as RGB ``(H, W, 3)`` uint8 or uint16 (grayscale repeated, alpha dropped)."""
+    path = Path(path)
+    if not path.is_file():
+        raise BurstError(f"{path}: no such file")
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise BurstError(f"{path}: not a readable image (corrupt, truncated or unsupported format)")
+    if image.dtype not in (np.uint8, np.uint16):
+        raise BurstError(f"{path}: unsupported pixel type {image.dtype} (use 8 or 16 bit)")
+    if image.ndim == 2:
+        image = np.repeat(image[..., None], 3, axis=2)
+    elif image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
+    elif image.shape[2] == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    else:
+        raise BurstError(f"{path}: {image.shape[2]} channels (expected 1, 3 or 4)")
+    return image
+
+
+def _read_video(path: Path, frames: slice | tuple[int, int] | None) -> list[np.ndarray]:
+    capture = cv2.VideoCapture(str(path))
+    if not capture.isOpened():
+        raise BurstError(f"{path}: not a readable video")
+    count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+    start, stop = (0, count) if frames is None else (frames.start or 0, frames.stop) if isinstance(frames, slice) else frames
+    stop = count if stop is None else stop
+    if not 0 <= start < stop <= count:
+        capture.release()
+        raise BurstError(f"{path}: frame range {start}..{stop} outside the video's {count} frames")
+    capture.set(cv2.CAP_PROP_POS_FRAMES, start)
+    out = []
+    for index in range(start, stop):
+        ok, frame = capture.read()
+        if not ok:
+            capture.release()
+            raise BurstError(f"{path}: could not decode frame {index}")
+        out.append(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+    capture.release()
+    return out
+
+
+def burst_files(path: str | Path) -> list[Path]:
+    """The frame files of a burst folder, naturally sorted; error if there are none."""
+    folder = Path(path)
+    files = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")),
+                   key=natural_key)
+    if not files:
+        raise BurstError(f"{folder}: empty folder (no {', '.join(IMAGE_SUFFIXES)} frames)")
+    return files
+
+
+def load_burst(source: str | Path | Sequence[str | Path], frames: slice | tuple[int, int] | None = None) -> np.ndarray:
+    """Read a burst as ``(N, H, W, 3)`` uint8 or uint16 RGB, in temporal order.
+
+    ``source`` is a folder of frames (sorted naturally: ``f2`` before ``f10``), a list of
+    frame files (in the given order), one image (N = 1) or a video file (``frames``
+    picks a range ``(start, stop)``, stop exclusive).  N must be odd and all frames
+    must share one size and dtype; any problem raises :class:`BurstError` naming the
+    file.
+    """
+    if isinstance(source, (list, tuple)):
+        if not source:
+            raise BurstError("empty list of frames")
+        paths = [Path(p) for p in source]
+        images = [read_image(p) for p in paths]
+    else:
+        path = Path(source)
+        if path.is_dir():
+            paths = burst_files(path)
+            images = [read_image(p) for p in paths]
+        elif path.suffix.lower() in VIDEO_SUFFIXES:
+            if not path.is_file():
+                raise BurstError(f"{path}: no such file")
+            images = _read_video(path, frames)
+            paths = [path] * len(images)
+        elif path.exists():
+            paths, images = [path], [read_image(path)]
+        else:
+            raise BurstError(f"{path}: no such file or folder")
+    first = images[0]
+    for p, image in zip(paths, images):
+        if image.shape != first.shape:
+            raise BurstError(f"{p}: size {image.shape[1]}x{image.shape[0]} differs from the first frame's "
+                             f"{first.shape[1]}x{first.shape[0]} ({paths[0]})")
+        if image.dtype != first.dtype:
+            raise BurstError(f"{p}: {image.dtype} differs from the first frame's {first.dtype}")
+    if len(images) % 2 == 0:
+        where = paths[0].parent if len(set(paths)) > 1 else paths[0]
+        raise BurstError(f"{where}: {len(images)} frames; a burst needs an odd number (the middle one is the common frame)")
+    return np.stack(images)
+
+
+def save_burst(burst: np.ndarray, folder: str | Path) -> list[Path]:
+    """Write a burst's frames as ``folder/frame_000.png ...`` (8 or 16 bit PNG), atomically each."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, frame in enumerate(burst):
+        path = folder / f"frame_{i:03d}.png"
+        with atomic_path(path) as tmp:
+            if not cv2.imwrite(str(tmp), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)):
+                raise OSError(f"{path}: could not write")
+        paths.append(path)
+    return paths
+
+
+def write_features_npz(path: str | Path, features: dict[str, np.ndarray], image_size: tuple[int, int]) -> Path:
+    """``.npz`` with ``keypoints`` (K, 3) x, y, scale (pixel centres at integer coordinates),
+    ``descriptors`` (K, D), ``scores`` (K,) and ``imsize`` (W, H); written atomically."""
+    path = Path(path)
+    keypoints = np.concatenate([features["keypoints"], features["scales"][:, None]], 1).astype(np.float32)
+    extra = {k: v for k, v in features.items() if k not in ("keypoints", "scales", "descriptors", "scores")}
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, keypoints=keypoints, descriptors=features["descriptors"], scores=features["scores"],
+                 imsize=np.array(image_size, np.int32), **extra)
+    return path
+
+
+def read_features_npz(path: str | Path) -> dict[str, np.ndarray]:
+    """Features written by :func:`write_features_npz` in the features-dict layout (plus ``imsize``)."""
+    with np.load(path) as data:
+        out = {k: data[k] for k in data.files}
+    kp = out.pop("keypoints")
+    out["keypoints"], out["scales"] = kp[:, :2].copy(), kp[:, 2].copy()
+    return out
+
+
+def write_features_h5(path: str | Path, name: str, features: dict[str, np.ndarray], image_size: tuple[int, int]) -> None:
+    """Add or replace group ``name`` in an hloc-style ``features.h5``: ``keypoints`` (K, 2)
+    float32 (pixel centres at integer coordinates, as hloc; COLMAP adds 0.5),
+    ``descriptors`` (D, K), ``scores`` (K,), ``image_size`` (W, H)."""
+    import h5py
+
+    with h5py.File(path, "a") as f:
+        if name in f:
+            del f[name]
+        group = f.create_group(name)
+        group.create_dataset("keypoints", data=features["keypoints"].astype(np.float32))
+        group.create_dataset("descriptors", data=np.ascontiguousarray(features["descriptors"].T))
+        group.create_dataset("scores", data=features["scores"].astype(np.float32))
+        group.create_dataset("image_size", data=np.array(image_size, np.int64))
