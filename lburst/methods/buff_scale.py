@@ -109,15 +109,6 @@ class OctaveStack:
             iy, fy = iy + 1, 0.0
         return self.fraction(k, fx, fy), self.pad + iy - 1, self.pad + ix - 1
 
-    def slope_dog(self, shifts: np.ndarray) -> np.ndarray:
-        """Mean DoG stack ``(layers + 2, h, w)`` for one slope's per-frame shifts ``(N, 2)`` (octave px)."""
-        h, w = self.shape
-        out = np.zeros((self.dog_padded.shape[1], h, w), np.float32)
-        for k, shift in enumerate(shifts):
-            stack, y0, x0 = self.frame_shift(k, shift)
-            out += stack[:, y0 : y0 + h, x0 : x0 + w]
-        return out
-
     def slope_extrema(self, shifts: np.ndarray, band_bytes: int = 160 << 10) -> tuple[np.ndarray, np.ndarray]:
         """Maximum and minimum over slopes of the slope DoGs, each ``(layers + 2, h, w)``.
 
