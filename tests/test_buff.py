@@ -8,6 +8,8 @@ import pytest
 from skimage import data
 
 from lburst.features import check_features
+from lburst.noise import GaussianNoise
+from lburst.simulate import simulate_burst
 from lburst.methods import create
 from lburst.methods.buff import Buff, BuffConfig, remap
 from lburst.methods.buff_scale import cubic_weights
@@ -17,15 +19,9 @@ cv2.setNumThreads(1)
 
 
 def moving_burst(photo, velocity, noise: float, frames: int = 5, size: int = 320, seed: int = 0) -> np.ndarray:
-    """Photo moving at ``velocity`` px/frame: frame k shows the scene at p + t_k * velocity (bilinear)."""
-    rng = np.random.default_rng(seed)
-    photo = photo[: size + 32, : size + 32].astype(np.float32)
-    out = []
-    for t in np.arange(frames) - frames // 2:
-        m = np.float32([[1, 0, t * velocity[0]], [0, 1, t * velocity[1]]])
-        moved = cv2.warpAffine(photo, m, photo.shape[1::-1], flags=cv2.INTER_LINEAR)[16:-16, 16:-16]
-        out.append(np.clip(np.rint(moved + rng.normal(0, noise, moved.shape)), 0, 255).astype(np.uint8))
-    return np.stack(out)
+    """``photo`` moving at ``velocity`` px/frame (:func:`lburst.simulate.simulate_burst`, Gaussian noise)."""
+    photo = np.ascontiguousarray(photo[:size, :size])
+    return simulate_burst(photo, frames, velocity, GaussianNoise(noise) if noise else None, rng=seed)
 
 
 def blob_burst(centre, sigma, velocity, size=(120, 160), frames=5, amplitude=150.0) -> np.ndarray:

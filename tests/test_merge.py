@@ -8,6 +8,8 @@ import pytest
 from skimage import data
 
 from lburst.features import check_features
+from lburst.noise import GaussianNoise
+from lburst.simulate import simulate_burst
 from lburst.methods import create
 from lburst.methods.align import estimate_shifts, fit_linear
 from lburst.methods.merge import MergeThen, merge_burst
@@ -17,15 +19,9 @@ VELOCITY = np.array([1.37, -0.62])
 
 
 def moving_burst(velocity, noise: float, frames: int = 5, size: int = 320, seed: int = 0) -> np.ndarray:
-    """Photo moving at ``velocity`` px/frame: frame k shows the scene at p + t_k * velocity (bilinear)."""
-    rng = np.random.default_rng(seed)
-    photo = data.astronaut()[60 : 60 + size + 32, 80 : 80 + size + 32].astype(np.float32)
-    out = []
-    for t in np.arange(frames) - frames // 2:
-        m = np.float32([[1, 0, t * velocity[0]], [0, 1, t * velocity[1]]])
-        moved = cv2.warpAffine(photo, m, photo.shape[1::-1], flags=cv2.INTER_LINEAR)[16:-16, 16:-16]
-        out.append(np.clip(np.rint(moved + rng.normal(0, noise, moved.shape)), 0, 255).astype(np.uint8))
-    return np.stack(out)
+    """A photo moving at ``velocity`` px/frame (:func:`lburst.simulate.simulate_burst`, Gaussian noise)."""
+    photo = np.ascontiguousarray(data.astronaut()[60 : 60 + size, 80 : 80 + size])
+    return simulate_burst(photo, frames, velocity, GaussianNoise(noise) if noise else None, rng=seed)
 
 
 @pytest.mark.parametrize("noise", [0.0, 25.0])
