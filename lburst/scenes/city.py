@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from lburst.scenes.raycast import GROUND, Hits
-from lburst.scenes.textures import COLOUR_PHOTOS, GREY_PHOTOS, MipTexture, mosaic
+from lburst.scenes.textures import MipTexture, mosaic, noise_field, scatter_shapes
 
 BUILDING, LAMP = 0, 1
 FLOOR_TEXELS = 64  # wall texels per storey (and per window column)
@@ -157,11 +157,13 @@ def _paint_cars(img: np.ndarray, bounds: np.ndarray, phase: np.ndarray, cfg: Cit
 def _ground(bounds: np.ndarray, phase: np.ndarray, lamps: np.ndarray, cfg: CityConfig, rng: np.random.Generator) -> MipTexture:
     t = cfg.ground_texel
     width, height = (int(np.ceil(d / t)) for d in bounds[1] - bounds[0])
-    img = mosaic(COLOUR_PHOTOS + GREY_PHOTOS, height, width, 384, rng)
+    img = mosaic(height, width, rng)
+    # small objects everywhere make every place unique, whatever photo lies under it
+    scatter_shapes(img, int(width * height * t * t / 3.0), (int(0.3 / t) + 1, int(1.5 / t) + 2), rng)
     xs = bounds[0, 0] + (np.arange(width) + 0.5) * t
     ys = bounds[0, 1] + (np.arange(height) + 0.5) * t
     street = _street_mask(xs, phase[0], cfg)[None, :] | _street_mask(ys, phase[1], cfg)[:, None]
-    asphalt = mosaic(("gravel",), height, width, 512, rng).mean(-1, keepdims=True) * 0.35 + 30
+    asphalt = (70 + 14 * noise_field(height, width, rng, (1.0, 0.4 / t, 2.0 / t)))[..., None]  # grain and stains
     # dashed centre lines
     mid_x = np.abs((xs - phase[0]) % cfg.block - cfg.street_width / 2) < 0.08
     mid_y = np.abs((ys - phase[1]) % cfg.block - cfg.street_width / 2) < 0.08
@@ -177,7 +179,9 @@ def _ground(bounds: np.ndarray, phase: np.ndarray, lamps: np.ndarray, cfg: CityC
 
 def _walls(cfg: CityConfig, rng: np.random.Generator) -> MipTexture:
     h, w = 16 * FLOOR_TEXELS, 32 * FLOOR_TEXELS
-    base = mosaic(("brick", "coffee", "camera", "gravel", "rocket", "text"), h, w, 256, rng) * cfg.ambient
+    base = mosaic(h, w, rng).astype(np.float32)
+    scatter_shapes(base, h * w // 4000, (4, 24), rng)
+    base *= cfg.ambient
     rows, cols = h // FLOOR_TEXELS, w // FLOOR_TEXELS
     lit = rng.random((rows, cols)) < cfg.lit_windows
     warm = np.array([255, 215, 150.0])
@@ -191,7 +195,11 @@ def _walls(cfg: CityConfig, rng: np.random.Generator) -> MipTexture:
 
 
 def _roofs(cfg: CityConfig, rng: np.random.Generator) -> MipTexture:
-    return MipTexture(mosaic(("gravel", "grass", "coins", "moon", "cell", "brick", "chelsea"), 1024, 1024, 256, rng) * cfg.ambient)
+    n = int(120.0 / cfg.roof_texel)  # 120 m of distinct roof texture
+    roofs = mosaic(n, n, rng)
+    roofs = np.clip(roofs * (1 + 0.15 * noise_field(n, n, rng, (8.0, 64.0)))[..., None], 0, 255).astype(np.uint8)
+    scatter_shapes(roofs, n * n // 3000, (4, 24), rng)
+    return MipTexture(roofs * cfg.ambient)
 
 
 def _buildings(bounds: np.ndarray, phase: np.ndarray, cfg: CityConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

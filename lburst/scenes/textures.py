@@ -12,9 +12,11 @@ import cv2
 import numpy as np
 import skimage.data
 
-# scikit-image sample photos (bundled with the package, no download)
-COLOUR_PHOTOS = ("astronaut", "coffee", "chelsea", "rocket", "cat", "immunohistochemistry")
-GREY_PHOTOS = ("camera", "brick", "grass", "gravel", "moon", "coins", "clock", "cell", "text")
+# scikit-image sample photos (bundled with the package, no download); ``cat`` is ``chelsea``
+PHOTOS = (
+    "astronaut", "coffee", "chelsea", "rocket", "immunohistochemistry", "hubble_deep_field", "retina",
+    "camera", "brick", "grass", "gravel", "moon", "coins", "clock", "cell", "text",
+)
 
 
 @functools.lru_cache(maxsize=None)
@@ -26,29 +28,73 @@ def load_photo(name: str) -> np.ndarray:
     return np.ascontiguousarray(img[..., :3].astype(np.uint8))
 
 
-def random_tile(names: tuple[str, ...], size: int, rng: np.random.Generator) -> np.ndarray:
-    """A ``size x size`` uint8 tile: a random crop of a random photo, rotated by a
-    multiple of 90 degrees, maybe mirrored, with a random colour gain."""
-    img = load_photo(names[rng.integers(len(names))])
-    h, w = img.shape[:2]
-    crop = int(rng.uniform(0.5, 1.0) * min(h, w))
-    y, x = rng.integers(0, h - crop + 1), rng.integers(0, w - crop + 1)
-    tile = cv2.resize(img[y : y + crop, x : x + crop], (size, size), interpolation=cv2.INTER_AREA)
-    tile = np.rot90(tile, rng.integers(4))
-    if rng.random() < 0.5:
-        tile = tile[:, ::-1]
-    gain = rng.uniform(0.6, 1.2, size=3)
-    return np.clip(tile * gain.astype(np.float32), 0, 255).astype(np.uint8)
+@functools.lru_cache(maxsize=None)
+def photo_patches(names: tuple[str, ...] = PHOTOS, size: int = 256, min_std: float = 25.0) -> tuple[np.ndarray, ...]:
+    """Non-overlapping ``size x size`` uint8 (size, size, 3) patches of the photos at their
+    own resolution, leaving out flat ones (grey-level std below ``min_std``).  Distinct
+    patches keep a mosaic from repeating the same picture close by."""
+    out = []
+    for name in names:
+        img = load_photo(name)
+        for y in range(0, img.shape[0] - size + 1, size):
+            for x in range(0, img.shape[1] - size + 1, size):
+                patch = img[y : y + size, x : x + size]
+                if patch.mean(-1).std() >= min_std:
+                    out.append(patch)
+    return tuple(out)
 
 
-def mosaic(names: tuple[str, ...], height: int, width: int, tile: int, rng: np.random.Generator) -> np.ndarray:
-    """A uint8 (height, width, 3) grid of :func:`random_tile` tiles."""
+def mosaic(height: int, width: int, rng: np.random.Generator, patches: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
+    """A uint8 (height, width, 3) grid of photo patches, each rotated by a multiple of
+    90 degrees, maybe mirrored, with a random colour gain.  Patches are dealt in a
+    shuffled order, so a patch comes back only after all the others."""
+    patches = photo_patches() if patches is None else patches
+    tile = patches[0].shape[0]
     out = np.empty((height, width, 3), np.uint8)
+    order: list[int] = []
     for y in range(0, height, tile):
         for x in range(0, width, tile):
-            t = random_tile(names, tile, rng)
+            if not order:
+                order = list(rng.permutation(len(patches)))
+            t = np.rot90(patches[order.pop()], rng.integers(4))
+            if rng.random() < 0.5:
+                t = t[:, ::-1]
+            t = np.clip(t * rng.uniform(0.6, 1.2, size=3).astype(np.float32), 0, 255)
             out[y : y + tile, x : x + tile] = t[: height - y, : width - x]
     return out
+
+
+def noise_field(height: int, width: int, rng: np.random.Generator, scales: tuple[float, ...] = (1.0, 4.0, 16.0)) -> np.ndarray:
+    """Float32 (height, width) random texture, a sum of Gaussian noise smoothed at each
+    of ``scales`` (texels), each normalised to unit standard deviation: never repeats."""
+    out = np.zeros((height, width), np.float32)
+    for scale in scales:
+        step = max(int(scale), 1)
+        small = rng.standard_normal((height // step + 2, width // step + 2)).astype(np.float32)
+        if step > 1:
+            small = cv2.GaussianBlur(small, (0, 0), 1.0)
+            small /= small.std() + 1e-6
+        out += cv2.resize(small, (width + 2 * step, height + 2 * step), interpolation=cv2.INTER_CUBIC)[:height, :width]
+    return out / np.sqrt(len(scales))
+
+
+def scatter_shapes(img: np.ndarray, count: int, size: tuple[int, int], rng: np.random.Generator) -> None:
+    """Draw ``count`` random filled circles, rectangles and strokes (``size`` = min, max
+    extent in texels, random colours) into ``img`` (H, W, 3) uint8, in place."""
+    h, w = img.shape[:2]
+    for _ in range(count):
+        x, y = int(rng.integers(w)), int(rng.integers(h))
+        r = int(rng.integers(size[0], size[1] + 1)) // 2
+        colour = tuple(int(c) for c in rng.integers(0, 256, size=3))
+        kind = rng.integers(3)
+        if kind == 0:
+            cv2.circle(img, (x, y), r, colour, -1, cv2.LINE_AA)
+        elif kind == 1:
+            dx, dy = (int(v) for v in rng.integers(-r, r + 1, size=2))
+            cv2.rectangle(img, (x - abs(dx) - 1, y - abs(dy) - 1), (x + abs(dx) + 1, y + abs(dy) + 1), colour, -1)
+        else:
+            dx, dy = (int(v) for v in rng.integers(-2 * r, 2 * r + 1, size=2))
+            cv2.line(img, (x, y), (x + dx, y + dy), colour, max(r // 3, 1), cv2.LINE_AA)
 
 
 class MipTexture:
