@@ -73,6 +73,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fallback-exhaustive", action="store_true")
     parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
     parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
+    parser.add_argument("--single-camera", action="store_true", help="one camera for all images of a scene")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")
 
@@ -82,7 +83,7 @@ def main(args: argparse.Namespace) -> int:
 
     report = run_benchmark(args.scenes, args.methods, args.out, force=args.force, pairs=args.pairs,
                            overlap=args.overlap, fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
-                           camera=args.camera, num_threads=args.threads)
+                           camera=args.camera, single_camera=args.single_camera, num_threads=args.threads)
     table = markdown_table(report["rows"] + report["means"])
     with atomic_path(Path(args.out) / "table.md") as tmp:
         tmp.write_text(table + "\n")

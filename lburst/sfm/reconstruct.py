@@ -9,7 +9,9 @@ mapping; the largest model is written to ``OUT/colmap/model`` (binary) and
 ``OUT/colmap/model.ply``, and ``OUT/result.json`` holds the metrics
 (:mod:`lburst.sfm.metrics`), the registered images and their poses.
 
-Cameras: one COLMAP camera per distinct prior (so a scene from one camera shares one).
+Cameras: one COLMAP camera per image, as COLMAP does by default (a shared camera whose
+intrinsics drift in bundle adjustment, as they do under forward motion, stops every later
+registration), or with ``single_camera`` one for all images when their priors agree.
 The prior is, by ``camera`` option: ``'auto'`` the focal length from EXIF when a single
 image has one, else COLMAP's default ``SIMPLE_RADIAL`` with ``f = 1.2 * max(W, H)`` and a
 centred principal point; ``'default'`` always the latter; ``'reference'`` the scene's
@@ -52,6 +54,7 @@ class ReconstructOptions:
     fallback_exhaustive: bool = False
     camera: str = "auto"
     camera_model: str = "SIMPLE_RADIAL"
+    single_camera: bool = False
     fix_intrinsics: bool = False
     mapper: str = "incremental"
     num_threads: int = 2
@@ -202,15 +205,9 @@ def scene_cameras(scene: Scene, shapes: list[tuple[int, int]], options: Reconstr
         elif options.camera == "auto" and exif_source(item) is not None:
             camera = exif_camera(exif_source(item), options.camera_model)
         priors.append(camera or default_camera(w, h, options.camera_model))
-    cameras: list[dict] = []
-    index = []
-    for prior in priors:
-        if prior not in cameras:
-            cameras.append(prior)
-        index.append(cameras.index(prior))
-    if len(cameras) < len(priors) and len(cameras) > 1:  # shared only when every image has the same prior
-        cameras, index = priors, list(range(len(priors)))
-    return cameras, index
+    if options.single_camera and all(prior == priors[0] for prior in priors):
+        return [priors[0]], [0] * len(priors)
+    return priors, list(range(len(priors)))
 
 
 def match_pairs(features: list[Features], pairs: list[tuple[int, int]], progress: bool = True) -> list[np.ndarray]:
@@ -298,6 +295,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto",
                         help="intrinsics prior: EXIF or default (auto), default, or the scene's reference.json")
     parser.add_argument("--camera-model", default="SIMPLE_RADIAL")
+    parser.add_argument("--single-camera", action="store_true",
+                        help="one camera for all images (when their priors agree) instead of one per image")
     parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
@@ -308,7 +307,8 @@ def main(args: argparse.Namespace) -> int:
         result = reconstruct_scene(args.scene, args.method, args.out, pairs=args.pairs, overlap=args.overlap,
                                    fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
                                    camera=args.camera, camera_model=args.camera_model,
-                                   fix_intrinsics=args.fix_intrinsics, num_threads=args.threads, seed=args.seed)
+                                   single_camera=args.single_camera, fix_intrinsics=args.fix_intrinsics,
+                                   num_threads=args.threads, seed=args.seed)
     except (ReconstructionError, ValueError) as err:
         print(f"lburst reconstruct: {err}", file=sys.stderr)
         return 1
