@@ -40,3 +40,11 @@ def test_sift_registers_a_synthetic_flight(flight, tmp_path):
     ref = evaluate_against_reference(again, Reference.load(flight / "reference.json"))
     assert ref["ate_rmse"] == pytest.approx(m["ate_rmse"])
     assert json.loads((tmp_path / "out" / "result.json").read_text())["method"] == "sift,max_features=1500"
+
+
+@pytest.mark.slow
+def test_global_mapper_registers_the_flight(flight, tmp_path):
+    result = reconstruct_scene(flight, "sift,max_features=1500", tmp_path / "out", progress=False, mapper="global",
+                               single_camera=True, extra={"max_num_trials": 2000})
+    assert result.error is None and result.registered == result.names
+    assert result.metrics["ate_percent"] < 1.0
