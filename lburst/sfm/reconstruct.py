@@ -47,7 +47,18 @@ class ReconstructionError(RuntimeError):
 
 @dataclass
 class ReconstructOptions:
-    """How to reconstruct (see the module docstring); ``colmap`` is a :class:`lburst.sfm.colmap.ColmapOptions` dict."""
+    """How to reconstruct (see the module docstring).
+
+    Attributes:
+        pairs: ``'exhaustive'``, ``'sequential'`` (neighbours up to ``overlap`` apart) or
+            ``'auto'`` (exhaustive up to 20 images, else sequential).
+        fallback_exhaustive: rerun with every pair when sequential pairs leave images out.
+        camera, camera_model, single_camera, fix_intrinsics: cameras (module docstring).
+        mapper: ``'incremental'`` or ``'global'``.
+        num_threads, seed: for COLMAP (repeatable for one thread count).
+        progress: tqdm bars.
+        extra: further :class:`lburst.sfm.colmap.ColmapOptions` fields, e.g. ``max_num_trials``.
+    """
 
     pairs: str = "auto"
     overlap: int = 10
