@@ -240,3 +240,41 @@ def test_command_line(tmp_path, capsys):
     assert len(list((out / "0001").glob("frame_*.png"))) == 3
     assert nf.main(parser.parse_args([str(out), "--frames", "4"])) == 2
     assert "odd" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_colmap_sift_registers_the_clean_flight(tmp_path):
+    """COLMAP's own SIFT pipeline registers every clean common frame of the default flight,
+    and its camera centres match the ground truth up to a similarity (about 70 s)."""
+    pycolmap = pytest.importorskip("pycolmap")
+    from lburst.sfm.poses import umeyama
+
+    cfg = nf.NightFlightConfig()
+    ref = nf.reference(cfg)
+    images = tmp_path / "images"
+    images.mkdir()
+    for name, frame in nf.clean_common_frames(cfg).items():
+        cv2.imwrite(str(images / f"{name}.png"), frame[..., ::-1])
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = "PINHOLE"
+    reader.camera_params = ",".join(str(v) for v in ref.camera["params"])
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = 1
+    database = tmp_path / "database.db"
+    pycolmap.extract_features(database, images, camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
+                              extraction_options=extraction, device=pycolmap.Device.cpu)
+    pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu)
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = 1
+    options.ba_refine_focal_length = False
+    options.ba_refine_principal_point = False
+    options.ba_refine_extra_params = False
+    models = pycolmap.incremental_mapping(database, images, tmp_path / "sparse", options=options)
+    model = max(models.values(), key=lambda m: m.num_reg_images())
+    assert model.num_reg_images() == cfg.n_bursts
+    estimated = {image.name[:-4]: image.projection_center() for image in model.images.values()}
+    names = sorted(ref.poses)
+    source = np.array([estimated[n] for n in names])
+    target = np.array([ref.centers()[n] for n in names])
+    errors = np.linalg.norm(umeyama(source, target).apply(source) - target, axis=1)
+    assert np.sqrt(np.mean(errors**2)) < 0.001 * ref.length
