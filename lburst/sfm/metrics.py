@@ -182,7 +182,8 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         values = [row[key] for row in rows if row.get(key) is not None]
         if key in TRAJECTORY_KEYS:
             values = [row[key] for row in rows if row.get(key) is not None and row.get("converged")]
-            out["trajectory_scenes"] = len(values)
+            if key == "ate_rmse":
+                out["trajectory_scenes"] = len(values)
         out[key] = float(np.mean(values)) if values else None
     return out
 

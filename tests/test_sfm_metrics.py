@@ -1,0 +1,55 @@
+"""The table's definitions on hand-made counts, averaging over scenes, and the benchmark's resume."""
+
+import json
+
+from lburst.bench.reconstruction import method_slug, run_benchmark
+from lburst.sfm.metrics import aggregate, markdown_table, scene_metrics
+from lburst.sfm.reconstruct import ReconstructionResult
+
+
+def test_scene_metrics_by_hand():
+    summary = {"converged": True, "registered": {"a": {}, "b": {}, "c": {}}, "num_points3D": 300}
+    m = scene_metrics(4, [100, 200, 300, 400], [50, 30, 20], [25, 15, 0], summary)
+    assert m["converged"] == 1.0
+    assert m["registered_pct"] == 75.0
+    assert m["keypoints_per_image"] == 250.0
+    assert m["putative_per_image"] == 25.0  # 100 matches / 4 images
+    assert m["inliers_per_image"] == 10.0
+    assert m["match_ratio"] == 0.4  # 40 / 100
+    assert m["match_score"] == 0.04  # 40 / 1000
+    assert m["points3D_per_image"] == 100.0  # 300 points / 3 registered images
+
+
+def test_scene_metrics_without_a_model():
+    m = scene_metrics(2, [10, 10], [0], [], {"converged": False, "registered": {}, "num_points3D": 0})
+    assert m["converged"] == 0.0 and m["registered_pct"] == 0.0 and m["match_ratio"] == 0.0
+
+
+def test_aggregate_trajectory_errors_over_converged_scenes_only():
+    rows = [{"converged": 1.0, "registered_pct": 100.0, "ate_rmse": 2.0},
+            {"converged": 0.0, "registered_pct": 0.0, "ate_rmse": 10.0}]
+    mean = aggregate(rows)
+    assert mean["converged"] == 0.5 and mean["registered_pct"] == 50.0
+    assert mean["ate_rmse"] == 2.0 and mean["trajectory_scenes"] == 1
+    assert mean["precision"] is None
+    table = markdown_table([{"method": "sift", "scene": "mean", **mean}])
+    assert table.splitlines()[2].startswith("| sift | mean | 0.50 | 50.0 |") and "| - |" in table
+
+
+def test_benchmark_skips_finished_runs(tmp_path):
+    scene = tmp_path / "missing_scene"  # would fail if it were run again
+    out = tmp_path / "bench" / method_slug("sift") / scene.name
+    done = ReconstructionResult(str(scene), "sift", str(out), ["a", "b"], ["a", "b"],
+                                metrics={"converged": 1.0, "registered_pct": 100.0})
+    done.save()
+    report = run_benchmark([scene], ["sift", "orb"], tmp_path / "bench", progress=False)
+    sift, orb = report["rows"]
+    assert sift["registered_pct"] == 100.0 and sift["error"] is None
+    assert orb["converged"] == 0.0 and "not a folder" in orb["error"]
+    assert json.loads((tmp_path / "bench" / "results.json").read_text())["means"][0]["registered_pct"] == 100.0
+
+
+def test_method_slug_is_a_safe_unique_name():
+    a, b = method_slug("r2d2:../shared/anchors/R2D2.pt"), method_slug("r2d2:/other/R2D2.pt")
+    assert "/" not in a and a != b
+    assert method_slug("sift") != method_slug("sift,root=true")
