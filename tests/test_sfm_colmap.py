@@ -76,3 +76,14 @@ def test_epipolar_distance_of_a_rectified_pair():
     xb_moved = xb + [[0, 3.0], [7.0, 0.0], [0, -1.5]]  # off the row by 3 px; along it; off by 1.5 px
     np.testing.assert_allclose(epipolar_distances(xa, xb_moved, camera, camera, pose_a, pose_b), [3.0, 0.0, 1.5],
                                atol=1e-9)
+
+
+def test_a_failing_colmap_child_is_reported_not_fatal(tmp_path):
+    from lburst.sfm.colmap import ColmapError, run_job_subprocess
+
+    job, _, _, _ = small_job(tmp_path)
+    job.save(tmp_path / "job.json")
+    (tmp_path / "input.npz").write_bytes(b"not an npz")
+    with pytest.raises(ColmapError, match="exited with 1") as err:
+        run_job_subprocess(tmp_path)
+    assert "colmap.log" in str(err.value)
