@@ -61,6 +61,12 @@ class PairDataset(Dataset):
         }
 
 
+def init_worker(_: int) -> None:
+    """Loader workers use one thread each: the parallelism is across workers."""
+    cv2.setNumThreads(1)
+    torch.set_num_threads(1)
+
+
 class StreamSampler(Sampler[int]):
     """Indices ``start, start + stride, ...`` of the endless stream (``stride`` > 1 for
     data-parallel ranks, each starting at its own offset)."""
