@@ -187,7 +187,10 @@ class LBurst:
         long_side = max(height, width)
         xs, ys, scales, scores, descs = [], [], [], [], []
         s = 1.0
-        while s + 0.001 >= max(cfg.min_scale, cfg.min_size / long_side):
+        lowest = max(cfg.min_scale, cfg.min_size / long_side)
+        if s + 0.001 < lowest:  # an image smaller than min_size: one level at its own size
+            lowest = s
+        while s + 0.001 >= lowest:
             if s - 0.001 <= min(cfg.max_scale, cfg.max_size / long_side):
                 h, w = x.shape[-2:]
                 if cfg.fast or self.net is None:
@@ -208,9 +211,12 @@ class LBurst:
                 scales.append(torch.full((len(y),), 32 / s, device=x.device))
                 scores.append(rep[0, 0, y, xx] * rel[0, 0, y, xx])
             s /= cfg.scale_factor
-            if s + 0.001 >= max(cfg.min_scale, cfg.min_size / long_side):  # a next level: resize the last one
+            if s + 0.001 >= lowest:  # a next level: resize the last one
                 size = (round(height * s), round(width * s))
                 x = F.interpolate(x, size, mode="bilinear", align_corners=False)
+        if not scores:
+            raise ValueError(f"no pyramid level between max_size {cfg.max_size} and min_size {cfg.min_size} "
+                             f"for a {width}x{height} image")
         score = torch.cat(scores)
         k = len(score) if cfg.top_k is None else min(cfg.top_k, len(score))
         order = torch.topk(score, k, sorted=True).indices

@@ -139,3 +139,11 @@ def test_corrupt_and_truncated_checkpoints_are_clear_errors(tmp_path):
     torch.save({"net": "Fast_Quad_L2Net_ConfCFS(inchan=15)", "state_dict": net.state_dict()}, mismatch)
     with pytest.raises(CheckpointError, match="do not fit"):
         load_checkpoint(mismatch)
+
+
+def test_images_smaller_than_min_size_are_processed_at_their_own_size():
+    torch.manual_seed(0)
+    model = LBurst(LBurstNet(NetConfig(frames=1)).eval())
+    image = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    feats = model.extract(image, rel_thr=0, rep_thr=0)
+    assert len(feats["keypoints"]) > 0 and set(feats["scales"]) == {32.0}
