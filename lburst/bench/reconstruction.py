@@ -2,7 +2,8 @@
 
 For each (method, scene) :func:`lburst.sfm.reconstruct_scene` runs in
 ``OUT/<method>/<scene>/`` unless that folder already holds a finished ``result.json``
-of the same method (so an interrupted benchmark resumes; ``--force`` reruns).  The table
+of the same method (so an interrupted benchmark resumes; ``--force`` reruns); a finished
+run is evaluated against the scene's ``reference.json`` if that appeared since.  The table
 (:mod:`lburst.sfm.metrics`: one row per method and scene, and each method's mean over
 scenes) is printed as markdown and written to ``OUT/table.md`` and ``OUT/results.json``.
 """
@@ -18,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from lburst.io import atomic_path
+from lburst.sfm.scene import REFERENCE_FILE
 
 
 def method_slug(spec: str) -> str:
@@ -35,6 +37,12 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
     if done.is_file() and not force:
         previous = ReconstructionResult.load(done)
         if previous.method == spec:
+            reference = scene / REFERENCE_FILE
+            if reference.is_file() and "reference_source" not in previous.metrics and not previous.error:
+                from lburst.sfm.metrics import evaluate_against_reference
+
+                previous.metrics.update(evaluate_against_reference(previous, reference))  # reference added since
+                previous.save()
             return {**row, **previous.metrics, "registered": len(previous.registered), "error": previous.error}
     try:
         result = reconstruct_scene(scene, spec, out, **options)
