@@ -15,7 +15,7 @@ def weights_path(name: str) -> Path:
     path = HERE / f"{name}.pt"
     if not path.is_file():
         raise FileNotFoundError(
-            f"{name} weights are not shipped in this version yet ({path} missing): "
+            f"{name} weights are not shipped in this version ({path} missing; see lburst/weights/README.md): "
             "pass a checkpoint with --weights PATH or set LBURST_WEIGHTS"
         )
     return path
