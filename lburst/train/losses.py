@@ -109,7 +109,8 @@ def reliability_ap_loss(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """R2D2's reliability loss ``1 - AP * rel - (1 - rel) * base`` averaged over queries.
 
-    Returns ``(loss, mean AP)``.
+    Returns ``(loss, mean AP)``; the mean AP keeps its gradient (for an unweighted
+    descriptor term, see :class:`lburst.train.loop.TrainConfig`).
     """
     bsz, _, h, w = desc_a.shape
     dev = desc_a.device
@@ -129,7 +130,7 @@ def reliability_ap_loss(
     batch, qx, qy, target = batch[valid], qx[valid], qy[valid], target[valid]
     if len(batch) == 0:
         zero = desc_a.sum() * 0
-        return zero, zero.detach()
+        return zero, zero
     query = _gather(desc_a, batch, qx, qy)  # (Q, D)
 
     # candidates in a disc around the rounded target
@@ -160,5 +161,5 @@ def reliability_ap_loss(
     ap = quantized_ap(scores, labels, cfg.bins, keep)
     rel = rel_a[batch, 0, qy, qx]
     loss = 1 - ap * rel - (1 - rel) * cfg.base
-    return loss.mean(), ap.mean().detach()
+    return loss.mean(), ap.mean()
 
