@@ -123,11 +123,22 @@ def _config_from_dict(d: dict) -> TrainConfig:
     return TrainConfig(**d, pair=pair)
 
 
+def _to_cpu(obj):
+    """Tensors of a nested state dict moved to the CPU (so a GPU run resumes anywhere)."""
+    if isinstance(obj, torch.Tensor):
+        return obj.cpu()
+    if isinstance(obj, dict):
+        return {k: _to_cpu(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_to_cpu(v) for v in obj)
+    return obj
+
+
 def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds: float, generator) -> None:
     state = {
         "net": net.config.net_string(),
         "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()},
-        "optimizer": optimizer.state_dict(),
+        "optimizer": _to_cpu(optimizer.state_dict()),
         "step": step,
         "seconds": seconds,
         "config": _config_dict(cfg),
