@@ -1,0 +1,263 @@
+"""``lburst bench homography``: the paper's noisy-burst matching experiment on any sequences.
+
+Protocol (reproducible by anyone):
+
+1. Sequences in Oxford or HPatches layout (:mod:`lburst.bench.sequences`), optionally
+   resized to ``--max-side`` with the homographies composed accordingly.
+2. Every image I becomes a 5-frame burst whose middle frame is I: frame k is I
+   translated by k*(dx, dy), (dx, dy) uniform in [-3, 3]^2, bilinear with reflected
+   borders, then Gaussian noise of std sigma (0..255) on every frame and channel,
+   rounded and clipped (:func:`lburst.simulate.simulate_burst`); motion and noise come
+   from one generator seeded by ``stable_seed(sequence, image index, noise label)``.
+   A ``--noise SPEC`` level uses that :mod:`lburst.noise` model instead.
+3. Methods: any :func:`lburst.methods.create` spec, plus ``gold:CKPT`` (the single-image
+   network on the clean image) and ``oracle-merge+X`` (frames aligned with the true
+   shifts, averaged, then X).  Learned methods keep the top 5000 keypoints.
+4. Mutual nearest neighbours; metrics of :mod:`lburst.bench.metrics` for the pairs
+   (1, K), K = 2..6; averaged over the 5 pairs of a sequence, then over sequences.
+   A second table keeps only pairs rotated by 25 degrees or less (pooled).
+
+Features are cached per (method, noise level, sequence, image) under ``OUT/cache``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import re
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, rotation_deg
+from lburst.bench.sequences import Sequence, list_sequences, read_sequence
+from lburst.features import Features
+from lburst.io import atomic_path
+from lburst.match import mutual_nearest_neighbours
+from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
+from lburst.simulate import random_motion, simulate_burst, stable_seed
+
+MAX_ROTATION_DEG = 25.0
+LEARNED = ("lburst", "r2d2", "gold")
+
+
+@dataclass(frozen=True)
+class NoiseLevel:
+    label: str
+    model: NoiseModel | None
+
+
+def noise_levels(sigmas: list[float], specs: list[str]) -> list[NoiseLevel]:
+    levels = [NoiseLevel(f"sigma{s:g}", GaussianNoise(float(s)) if s > 0 else None) for s in sigmas]
+    return levels + [NoiseLevel(spec, noise_from_spec(spec)) for spec in specs]
+
+
+def protocol_burst(image: np.ndarray, sequence: str, index: int, level: NoiseLevel, frames: int = 5,
+                   max_shift: float = 3.0) -> tuple[np.ndarray, tuple[float, float]]:
+    """The benchmark's burst of ``image`` and its per-frame motion (see the module docstring)."""
+    rng = np.random.default_rng(stable_seed(sequence, index, level.label))
+    motion = random_motion(rng, max_shift)
+    return simulate_burst(image, frames, motion, level.model, rng), motion
+
+
+class MethodRunner:
+    """Features of one image under the protocol for one method spec."""
+
+    def __init__(self, spec: str, top_k: int) -> None:
+        from lburst.methods import create
+
+        self.spec = spec
+        kind = spec.split(":")[0].split(",")[0].removeprefix("oracle-merge+").removeprefix("merge+")
+        options = {"top_k": str(top_k)} if kind in LEARNED else {}
+        if spec.startswith("gold:"):
+            self.mode, self.extractor = "gold", create("r2d2:" + spec[len("gold:"):], **options)
+        elif spec.startswith("oracle-merge+"):
+            self.mode, self.extractor = "oracle", create(spec[len("oracle-merge+"):], **options)
+        else:
+            self.mode, self.extractor = "burst", create(spec, **options)
+
+    def __call__(self, image: np.ndarray, burst: np.ndarray, motion: tuple[float, float]) -> Features:
+        if self.mode == "gold":
+            return self.extractor(image[None])
+        if self.mode == "oracle":
+            from lburst.methods.merge import merge_burst
+
+            k = np.arange(len(burst)) - len(burst) // 2
+            merged = merge_burst(burst, shifts=k[:, None] * np.asarray(motion)[None])
+            return self.extractor(np.clip(np.round(merged), 0, 255).astype(np.uint8)[None])
+        return self.extractor(burst)
+
+
+def _slug(spec: str) -> str:
+    readable = re.sub(r"[^A-Za-z0-9_.+-]+", "_", spec)[-60:]
+    return f"{readable}-{hashlib.sha1(spec.encode()).hexdigest()[:8]}"
+
+
+def _cached(path: Path, compute) -> tuple[Features, float]:
+    if path.is_file():
+        with np.load(path) as data:
+            feats = {k: data[k] for k in data.files}
+        return feats, float(feats.pop("seconds"))
+    start = time.perf_counter()
+    feats = compute()
+    seconds = time.perf_counter() - start
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, seconds=seconds, **{k: feats[k] for k in ("keypoints", "scales", "scores", "descriptors")})
+    return feats, seconds
+
+
+def pair_metrics(seq: Sequence, feats: list[Features], k: int) -> dict:
+    """Metrics of pair (1, k + 2)."""
+    h = seq.homographies[k]
+    a, b = feats[0], feats[k + 1]
+    matches = mutual_nearest_neighbours(a["descriptors"], b["descriptors"])
+    errors = match_errors(h, a["keypoints"], b["keypoints"], matches)
+    n_kp = (len(a["keypoints"]) + len(b["keypoints"])) / 2
+    return {
+        "mma": mma(errors).tolist(),
+        "rep3": repeatability(h, a["keypoints"], b["keypoints"], seq.images[0].shape, seq.images[k + 1].shape, 3.0),
+        "matching_score": float((errors <= 3).sum() / n_kp) if n_kp else 0.0,
+        "keypoints": n_kp,
+        "matches": int(len(matches)),
+        "rotation_deg": rotation_deg(h, seq.images[0].shape),
+    }
+
+
+def _mean(rows: list[dict]) -> dict:
+    if not rows:
+        return {}
+    out = {key: float(np.mean([r[key] for r in rows])) for key in ("rep3", "matching_score", "keypoints", "matches")}
+    out["mma"] = np.mean([r["mma"] for r in rows], axis=0).tolist()
+    if "seconds" in rows[0]:
+        out["seconds"] = float(np.mean([r["seconds"] for r in rows]))
+    return out
+
+
+def summarize(per_pair: dict[str, list[dict]], seconds: dict[str, float], kinds: dict[str, str]) -> dict:
+    """Means: per sequence, over sequences (``all``), per kind, and pooled pairs rotated <= 25 degrees."""
+    per_seq = {s: {**_mean(rows), "seconds": seconds[s]} for s, rows in per_pair.items()}
+    out = {"sequences": per_seq, "all": _mean(list(per_seq.values()))}
+    for kind in sorted(set(kinds.values()) - {"other"}):
+        out[kind] = _mean([per_seq[s] for s in per_seq if kinds[s] == kind])
+    small = [r for rows in per_pair.values() for r in rows if r["rotation_deg"] <= MAX_ROTATION_DEG]
+    out["rotation_le_25"] = {**_mean(small), "pairs": len(small)}
+    return out
+
+
+def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[float], out: str | Path,
+                             noise_specs: list[str] = (), max_side: int | None = None, top_k: int = 5000,
+                             progress: bool = True) -> dict:
+    """Run the protocol; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``."""
+    out = Path(out)
+    folders = list_sequences(data)
+    levels = noise_levels(list(sigmas), list(noise_specs))
+    runners = {spec: MethodRunner(spec, top_k) for spec in methods}
+    results: dict = {"protocol": {"data": str(data), "sigmas": list(sigmas), "noise_specs": list(noise_specs),
+                                  "max_side": max_side, "top_k": top_k, "thresholds": list(THRESHOLDS)},
+                     "methods": {}}
+    bar = tqdm(total=len(levels) * len(folders) * len(methods) * 6, desc="homography bench", disable=not progress)
+    sequences = {f.name: read_sequence(f, max_side) for f in folders}
+    kinds = {name: seq.kind for name, seq in sequences.items()}
+    for spec, runner in runners.items():
+        results["methods"][spec] = {}
+        for level in levels:
+            per_pair, seconds = {}, {}
+            for name, seq in sequences.items():
+                feats, times = [], []
+                for i, image in enumerate(seq.images):
+                    burst, motion = protocol_burst(image, name, i, level)
+                    cache = out / "cache" / _slug(spec) / level.label / name / f"{i + 1}.npz"
+                    f, t = _cached(cache, lambda: runner(image, burst, motion))
+                    feats.append(f)
+                    times.append(t)
+                    bar.update(1)
+                per_pair[name] = [pair_metrics(seq, feats, k) for k in range(5)]
+                seconds[name] = float(np.mean(times))
+            results["methods"][spec][level.label] = {"summary": summarize(per_pair, seconds, kinds), "pairs": per_pair}
+    bar.close()
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out / "results.json") as tmp:
+        tmp.write_text(json.dumps(results, indent=1))
+    with atomic_path(out / "results.md") as tmp:
+        tmp.write_text(markdown(results))
+    plot_mma(results, out / "mma.png")
+    return results
+
+
+def _row(spec: str, s: dict) -> str:
+    if not s:
+        return f"| {spec} | - | - | - | - | - | - | - | - | - |"
+    m = s["mma"]
+    secs = f"{s['seconds']:.2f}" if "seconds" in s else "-"
+    return (f"| {spec} | {m[0]:.3f} | {m[2]:.3f} | {m[4]:.3f} | {m[9]:.3f} | {s['rep3']:.3f} | "
+            f"{s['matching_score']:.3f} | {s['keypoints']:.0f} | {s['matches']:.0f} | {secs} |")
+
+
+def markdown(results: dict) -> str:
+    """Tables per noise level: all pairs, split by kind, and pairs rotated <= 25 degrees."""
+    head = ("| method | MMA@1 | MMA@3 | MMA@5 | MMA@10 | rep@3 | match. score | #kpts | #matches | s/image |\n"
+            "|---|---|---|---|---|---|---|---|---|---|")
+    methods = results["methods"]
+    levels = list(next(iter(methods.values())).keys()) if methods else []
+    lines = []
+    for level in levels:
+        first = methods[next(iter(methods))][level]["summary"]
+        for part, title in [("all", "all pairs, mean over sequences")] + [
+            (k, f"{k} sequences") for k in ("viewpoint", "illumination") if k in first
+        ] + [("rotation_le_25", f"pairs rotated <= {MAX_ROTATION_DEG:g} deg (pooled, {first['rotation_le_25'].get('pairs', 0)} pairs)")]:
+            lines += [f"### {level}: {title}", "", head]
+            lines += [_row(spec, methods[spec][level]["summary"][part]) for spec in methods]
+            lines.append("")
+    return "\n".join(lines)
+
+
+def plot_mma(results: dict, path: Path) -> None:
+    """MMA against threshold, one panel per noise level, one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    methods = results["methods"]
+    levels = list(next(iter(methods.values())).keys())
+    fig, axes = plt.subplots(1, len(levels), figsize=(4.5 * len(levels), 4), squeeze=False)
+    for ax, level in zip(axes[0], levels):
+        for spec in methods:
+            ax.plot(THRESHOLDS, methods[spec][level]["summary"]["all"]["mma"], marker="o", ms=3, label=spec)
+        ax.set_title(level)
+        ax.set_xlabel("threshold (px)")
+        ax.set_ylim(0, 1)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("MMA")
+    axes[0][-1].legend(fontsize=7)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    p.add_argument("data", type=Path, help="folder of sequence folders (Oxford or HPatches layout)")
+    p.add_argument("--methods", nargs="+", default=["lburst", "sift", "orb", "merge+sift"])
+    p.add_argument("--sigma", type=float, nargs="+", default=[25, 50, 100], help="Gaussian noise std levels (0..255)")
+    p.add_argument("--noise", nargs="*", default=[], help="extra noise levels as lburst.noise specs")
+    p.add_argument("--max-side", type=int)
+    p.add_argument("--top-k", type=int, default=5000)
+    p.add_argument("--out", type=Path, default=Path("outputs/homography"))
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        results = run_homography_benchmark(args.data, args.methods, args.sigma, args.out, args.noise,
+                                           args.max_side, args.top_k)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(markdown(results))
+    print(f"results: {args.out / 'results.json'}, {args.out / 'results.md'}, {args.out / 'mma.png'}")
+    return 0

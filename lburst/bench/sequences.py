@@ -1,0 +1,90 @@
+"""Homography sequences: Oxford layout (``img1..img6`` + ``H1to2p..H1to6p``) or HPatches
+layout (``1.ppm..6.ppm`` + ``H_1_2..H_1_6``).  ``H1toK`` maps pixel coordinates of image 1
+to image K (pixel centres at integer coordinates, as lburst keypoints)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from lburst.io import BurstError, read_image
+
+
+@dataclass
+class Sequence:
+    """``images``: 6 RGB arrays (H, W, 3); ``homographies[k]``: 3x3 from image 1 to image k+2."""
+
+    name: str
+    images: list[np.ndarray]
+    homographies: list[np.ndarray]
+
+    @property
+    def kind(self) -> str:
+        """``viewpoint``/``illumination`` for HPatches names (``v_``/``i_``), else ``other``."""
+        return {"v_": "viewpoint", "i_": "illumination"}.get(self.name[:2], "other")
+
+
+def _find_image(folder: Path, stem: str) -> Path:
+    hits = sorted(p for p in folder.glob(f"{stem}.*") if p.suffix.lower() in (".png", ".ppm", ".jpg", ".jpeg", ".pgm", ".tif", ".tiff"))
+    if not hits:
+        raise FileNotFoundError(f"{folder}: no image {stem}.png/.ppm/...")
+    return hits[0]
+
+
+def _read_h(path: Path) -> np.ndarray:
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: homography file missing")
+    try:
+        h = np.loadtxt(path, dtype=np.float64)
+    except ValueError as exc:
+        raise ValueError(f"{path}: not a 3x3 matrix of numbers ({exc})") from exc
+    if h.shape != (3, 3):
+        raise ValueError(f"{path}: expected a 3x3 matrix, got shape {h.shape}")
+    return h
+
+
+def resize_matrix(scale_x: float, scale_y: float) -> np.ndarray:
+    """Pixel map of a resize by (sx, sy) with pixel centres at integer coordinates:
+    ``x' = (x + 0.5) * sx - 0.5``."""
+    return np.array([[scale_x, 0, 0.5 * (scale_x - 1)], [0, scale_y, 0.5 * (scale_y - 1)], [0, 0, 1]])
+
+
+def read_sequence(folder: str | Path, max_side: int | None = None) -> Sequence:
+    """Read one sequence; with ``max_side`` images larger than that are resized and the
+    homographies composed with the resizes."""
+    folder = Path(folder)
+    if (folder / "H1to2p").exists() or list(folder.glob("img1.*")):
+        stems, hfiles = [f"img{i}" for i in range(1, 7)], [f"H1to{k}p" for k in range(2, 7)]
+    else:
+        stems, hfiles = [str(i) for i in range(1, 7)], [f"H_1_{k}" for k in range(2, 7)]
+    try:
+        images = [read_image(_find_image(folder, s)) for s in stems]
+    except BurstError as exc:
+        raise ValueError(str(exc)) from exc
+    images = [(im / 257).astype(np.uint8) if im.dtype == np.uint16 else im for im in images]
+    homographies = [_read_h(folder / f) for f in hfiles]
+    if max_side:
+        mats = []
+        for i, im in enumerate(images):
+            h, w = im.shape[:2]
+            s = min(1.0, max_side / max(h, w))
+            size = (max(1, round(w * s)), max(1, round(h * s)))
+            if s < 1:
+                images[i] = cv2.resize(im, size, interpolation=cv2.INTER_AREA)
+            mats.append(resize_matrix(size[0] / w, size[1] / h))
+        homographies = [mats[k + 1] @ h @ np.linalg.inv(mats[0]) for k, h in enumerate(homographies)]
+    return Sequence(folder.name, images, homographies)
+
+
+def list_sequences(data: str | Path) -> list[Path]:
+    """Sequence folders under ``data`` (sorted); error if none."""
+    data = Path(data)
+    if not data.is_dir():
+        raise FileNotFoundError(f"{data}: no such folder")
+    folders = sorted(p for p in data.iterdir() if p.is_dir() and ((p / "H1to2p").exists() or (p / "H_1_2").exists()))
+    if not folders:
+        raise FileNotFoundError(f"{data}: no sequence folders (with H1to2p or H_1_2)")
+    return folders
