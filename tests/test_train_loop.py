@@ -84,3 +84,43 @@ def test_training_pairs_flow_maps_a_onto_b(photos):
     g = pair.homography
     p = g @ np.array([10.0, 20.0, 1.0])
     np.testing.assert_allclose(pair.flow[20, 10], p[:2] / p[2], atol=1e-3)
+
+
+def test_flow_sends_blobs_of_a_onto_the_same_blobs_of_b():
+    """Ground truth independent of the flow's own formula: blob centres found in both common frames."""
+    from scipy import ndimage
+
+    from lburst.train.pairs import training_pair
+
+    rng = np.random.default_rng(0)
+    size = 400
+    yy, xx = np.mgrid[0:size, 0:size].astype(np.float64)
+    photo = np.zeros((size, size), np.float64)
+    for cx, cy in rng.uniform(60, size - 60, (12, 2)):
+        photo += 200 * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * 3.0**2))
+    photo = np.repeat(np.clip(photo, 0, 255).astype(np.uint8)[..., None], 3, axis=2)
+    cfg = replace(TINY, crop=160, long_side=(400, 400), noise_variance=(0.0, 0.0), max_burst_motion=0.0,
+                  max_rotation_deg=10.0, max_tilt=0.1, max_pair_shift=8.0)
+    pair = training_pair(photo, np.random.default_rng(5), cfg)
+
+    def centres(img):
+        g = img[..., 0].astype(np.float64)
+        labels, n = ndimage.label(g > 40)
+        c = np.array(ndimage.center_of_mass(g, labels, range(1, n + 1)))[:, ::-1]  # (x, y)
+        sizes = ndimage.sum(np.ones_like(g), labels, range(1, n + 1))
+        touching = [np.any(labels[[0, -1], :] == i + 1) or np.any(labels[:, [0, -1]] == i + 1) for i in range(n)]
+        return c[(sizes > 20) & ~np.array(touching)]
+
+    ca, cb = centres(pair.burst_a[1]), centres(pair.burst_b[1])
+    assert len(ca) >= 3
+    checked = 0
+    for x, y in ca:
+        target = np.array([
+            cv2.remap(pair.flow[..., 0], np.float32([[x]]), np.float32([[y]]), cv2.INTER_LINEAR)[0, 0],
+            cv2.remap(pair.flow[..., 1], np.float32([[x]]), np.float32([[y]]), cv2.INTER_LINEAR)[0, 0],
+        ])
+        dist = np.linalg.norm(cb - target, axis=1)
+        if dist.min() < 5:
+            assert dist.min() < 0.1  # blob centres, so interpolation and blob shape distortion are small
+            checked += 1
+    assert checked >= 3
