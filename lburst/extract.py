@@ -39,6 +39,8 @@ class MultiScaleConfig:
             (``x * W / w``) instead of the pixel-centre-correct mapping.
         fast: use :class:`lburst.fast.FastLBurstNet` (same features, less work);
             ``False`` runs the plain network as the published code does.
+        precision: ``'fp32'``, or ``'bf16'``/``'fp16'`` for the fast path's backbone
+            (autocast; heads stay fp32): faster where the hardware has it, not identical.
     """
 
     min_size: int = 256
@@ -51,6 +53,7 @@ class MultiScaleConfig:
     top_k: int | None = 4000
     published_coordinates: bool = False
     fast: bool = True
+    precision: str = "fp32"
 
 
 def frame_permutation(n: int, order: str) -> list[int]:
@@ -105,6 +108,7 @@ class LBurst:
         self.frame_order = frame_order
         self._perm = frame_permutation(self.frames, frame_order)
         self._runner = runner
+        self._reduced: dict[str, FastLBurstNet] = {}
 
     @property
     def fast_net(self) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
@@ -112,6 +116,13 @@ class LBurst:
         if self._runner is None:
             self._runner = FastLBurstNet(self.net).to(self.device).eval()
         return self._runner
+
+    def _fast_level(self, x: torch.Tensor, precision: str):
+        if precision == "fp32" or self.net is None:
+            return self.fast_net(x)
+        if precision not in self._reduced:
+            self._reduced[precision] = FastLBurstNet(self.net, precision).to(self.device).eval()
+        return self._reduced[precision](x)
 
     @classmethod
     def from_onnx(cls, path: str | Path, frame_order: str = "temporal", threads: int | None = None) -> "LBurst":
@@ -194,7 +205,7 @@ class LBurst:
             if s - 0.001 <= min(cfg.max_scale, cfg.max_size / long_side):
                 h, w = x.shape[-2:]
                 if cfg.fast or self.net is None:
-                    rep, rel, half = self.fast_net(x)
+                    rep, rel, half = self._fast_level(x, cfg.precision)
                     y, xx = _local_maxima(rep, rel, cfg)
                     descs.append(descriptors_at(half, y, xx))
                 else:

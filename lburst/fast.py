@@ -61,8 +61,11 @@ _PARITY_WEIGHTS = ((0.25, 0.75), (0.75, 0.25))
 class FastLBurstNet(nn.Module):
     """Inference-only LBurst network; see the module docstring."""
 
-    def __init__(self, net: LBurstNet) -> None:
+    def __init__(self, net: LBurstNet, precision: str = "fp32") -> None:
         super().__init__()
+        if precision not in ("fp32", "bf16", "fp16"):
+            raise ValueError(f"precision must be fp32, bf16 or fp16, got {precision!r}")
+        self.precision = precision
         self.config = net.config
         self.body = fold_batchnorm(net.ops).eval().to(memory_format=torch.channels_last)
         heads = torch.cat([net.sal.weight, net.clf.weight])[:, :, 0, 0]  # (3, D): sal, clf0, clf1
@@ -110,8 +113,17 @@ class FastLBurstNet(nn.Module):
         return out.permute(0, 3, 1, 2)
 
     def core(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``(repeatability, reliability, half)`` at the network's output size ``2 * (H // 2)``."""
-        half = self.raw(x)
+        """``(repeatability, reliability, half)`` at the network's output size ``2 * (H // 2)``.
+
+        With ``precision`` ``'bf16'`` or ``'fp16'`` the backbone runs under autocast and
+        the heads in fp32 (so the 3x3 maxima do not tie on rounded values)."""
+        if self.precision == "fp32":
+            half = self.raw(x)
+        else:
+            dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}[self.precision]
+            with torch.autocast(device_type=x.device.type, dtype=dtype):
+                half = self.raw(x)
+            half = half.float()
         pre = self._heads(half)
         sal = F.softplus(pre[:, :1])
         return sal / (1 + sal), torch.softmax(pre[:, 1:], dim=1)[:, 1:2], half
@@ -147,8 +159,10 @@ def descriptors_at(half: torch.Tensor, y: torch.Tensor, x: torch.Tensor) -> torc
     interpolated from the half map (1, D, h, w) exactly as x2 bilinear upsampling does."""
     h, w = half.shape[-2:]
 
+    half = half.float()
+
     def taps(i: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        src = ((i.to(half.dtype) + 0.5) / 2 - 0.5).clamp(min=0)
+        src = ((i.to(torch.float32) + 0.5) / 2 - 0.5).clamp(min=0)
         i0 = src.floor().long()
         lam = src - i0
         return i0, (i0 + 1).clamp(max=n - 1), lam

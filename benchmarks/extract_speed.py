@@ -1,0 +1,133 @@
+"""Extraction speed: seconds per 5-frame burst at a 1024 px long side, per path.
+
+Paths: ``plain`` (the network run as the published code runs it: NCHW, full-resolution
+128-D maps at every level), ``fast`` (lburst's default, same features), and, when
+asked, ``bf16`` (bfloat16 autocast of the backbone, heads in fp32).  Each path runs in
+its own process so its peak memory can be read; times are medians of ``--repeats``
+runs after one warm-up, on random weights unless ``--weights`` is given (the time does
+not depend on the weights, the keypoint count does).
+
+    python benchmarks/extract_speed.py --out outputs/extract_speed.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+
+def _make_burst(size: tuple[int, int], frames: int) -> np.ndarray:
+    import skimage.data
+
+    import cv2
+
+    photo = cv2.resize(skimage.data.astronaut(), (size[1], size[0]), interpolation=cv2.INTER_LINEAR)
+    from lburst.noise import GaussianNoise
+    from lburst.simulate import simulate_burst
+
+    return simulate_burst(photo, frames, (1.5, 0.5), GaussianNoise(50.0), rng=0)
+
+
+def run_child(path: str, args: argparse.Namespace) -> dict:
+    from lburst.extract import LBurst
+    from lburst.model import LBurstNet, NetConfig
+
+    torch.set_num_threads(args.threads)
+    device = args.device
+    if args.weights:
+        model = LBurst.from_checkpoint(args.weights, device=device)
+    else:
+        torch.manual_seed(0)
+        model = LBurst(LBurstNet(NetConfig(frames=5)), device=device)
+    burst = _make_burst((args.height, args.width), model.frames)
+    options = {"fast": path != "plain", "precision": "bf16" if path == "bf16" else "fp32"}
+    if path == "plain":
+        model.net.to(memory_format=torch.contiguous_format)
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    times, count = [], 0
+    for i in range(args.repeats + 1):
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        start = time.perf_counter()
+        feats = model.extract(burst, top_k=args.top_k, **options)
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        if i:
+            times.append(time.perf_counter() - start)
+        count = len(feats["scores"])
+    if path == "bf16":  # agreement with fp32: share of keypoints within 1 px of an fp32 keypoint
+        from scipy.spatial import cKDTree
+
+        ref = model.extract(burst, top_k=args.top_k)
+        dist, _ = cKDTree(ref["keypoints"]).query(feats["keypoints"])
+        agreement = float((dist <= 1).mean())
+    else:
+        agreement = None
+    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    result = {"path": path, "median_s": statistics.median(times), "times_s": times, "keypoints": count,
+              "peak_rss_mb": rss1 / 1024, "extra_rss_mb": (rss1 - rss0) / 1024, "agreement_1px": agreement}
+    if device.startswith("cuda"):
+        result["peak_cuda_mb"] = torch.cuda.max_memory_allocated() / 2**20
+    return result
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "cpu"
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--paths", nargs="+", default=["plain", "fast"], choices=["plain", "fast", "bf16"])
+    p.add_argument("--weights", help="checkpoint (default: random weights)")
+    p.add_argument("--height", type=int, default=768)
+    p.add_argument("--width", type=int, default=1024)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--top-k", type=int, default=4000)
+    p.add_argument("--threads", type=int, default=torch.get_num_threads())
+    p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    p.add_argument("--out", type=Path, help="JSON results")
+    p.add_argument("--child", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.child:
+        print(json.dumps(run_child(args.child, args)))
+        return 0
+    results = []
+    for path in args.paths:
+        cmd = [sys.executable, __file__, "--child", path] + sys.argv[1:]
+        out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+        results.append(json.loads(out.strip().splitlines()[-1]))
+    base = next((r["median_s"] for r in results if r["path"] == "plain"), None)
+    device = torch.cuda.get_device_name() if args.device.startswith("cuda") else _cpu_name()
+    print(f"\n5-frame burst {args.width}x{args.height}, {args.device} ({device}), {args.threads} threads, "
+          f"median of {args.repeats}\n")
+    print("| path | s / burst | speed-up vs plain | keypoints | within 1 px of fp32 | peak RSS MB |")
+    print("|---|---|---|---|---|---|")
+    for r in results:
+        ratio = f"{base / r['median_s']:.2f}x" if base else "-"
+        agree = "-" if r["agreement_1px"] is None else f"{r['agreement_1px']:.3f}"
+        print(f"| {r['path']} | {r['median_s']:.2f} | {ratio} | {r['keypoints']} | {agree} | {r['peak_rss_mb']:.0f} |")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"device": device, "threads": args.threads, "size": [args.width, args.height],
+                                        "results": results}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
