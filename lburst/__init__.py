@@ -1,15 +1,37 @@
-"""lburst: learned features from low-light robotic bursts, and 3D reconstruction from them."""
+"""lburst: learned features from low-light robotic bursts, and 3D reconstruction from them.
 
-from lburst import methods, noise, simulate
-from lburst.extract import LBurst, MultiScaleConfig
-from lburst.features import Features
-from lburst.io import BurstError, load_burst, save_burst
-from lburst.model import CheckpointError, LBurstNet, NetConfig, load_checkpoint, save_checkpoint
-from lburst.simulate import simulate_burst
+The public names below are imported on first use, so ``import lburst`` (and the COLMAP
+child processes, which import ``lburst.sfm``) do not pay for torch until it is needed.
+"""
+
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "LBurst", "MultiScaleConfig", "Features", "LBurstNet", "NetConfig", "load_checkpoint", "save_checkpoint",
-    "CheckpointError", "BurstError", "load_burst", "save_burst", "simulate_burst", "methods", "noise", "simulate",
-]
+_EXPORTS = {
+    "LBurst": "lburst.extract",
+    "MultiScaleConfig": "lburst.extract",
+    "Features": "lburst.features",
+    "LBurstNet": "lburst.model",
+    "NetConfig": "lburst.model",
+    "CheckpointError": "lburst.model",
+    "load_checkpoint": "lburst.model",
+    "save_checkpoint": "lburst.model",
+    "BurstError": "lburst.io",
+    "load_burst": "lburst.io",
+    "save_burst": "lburst.io",
+    "simulate_burst": "lburst.simulate",
+}
+_MODULES = ("methods", "noise", "simulate", "io", "match", "model", "extract")
+
+__all__ = sorted(_EXPORTS) + list(_MODULES)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    if name in _MODULES:
+        return importlib.import_module(f"lburst.{name}")
+    raise AttributeError(f"module 'lburst' has no attribute {name!r}")
