@@ -40,9 +40,9 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pg
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg")
 
 
-def natural_key(path: Path) -> list:
+def natural_key(name: str) -> list:
     """Sort key that orders ``f2`` before ``f10``."""
-    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -92,7 +92,7 @@ def burst_files(path: str | Path) -> list[Path]:
     """The frame files of a burst folder, naturally sorted; error if there are none."""
     folder = Path(path)
     files = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")),
-                   key=natural_key)
+                   key=lambda p: natural_key(p.name))
     if not files:
         raise BurstError(f"{folder}: empty folder (no {', '.join(IMAGE_SUFFIXES)} frames)")
     return files

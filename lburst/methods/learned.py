@@ -7,6 +7,7 @@ import numpy as np
 from lburst.extract import LBurst
 from lburst.features import Features
 from lburst.methods import register
+from lburst.methods.options import as_bool
 
 
 class LearnedExtractor:
@@ -22,16 +23,6 @@ class LearnedExtractor:
         return self.model.extract(burst, top_k=self.top_k, **self.options)
 
 
-def _bool(value: str | bool) -> bool:
-    if isinstance(value, bool):
-        return value
-    if value.lower() in ("1", "true", "yes"):
-        return True
-    if value.lower() in ("0", "false", "no"):
-        return False
-    raise ValueError(f"expected a boolean, got {value!r}")
-
-
 def _make(arg: str | None, default: str, device=None, frame_order: str = "temporal", top_k="4000", **options):
     model = (
         LBurst.from_checkpoint(arg, device=device, frame_order=frame_order)
@@ -39,7 +30,7 @@ def _make(arg: str | None, default: str, device=None, frame_order: str = "tempor
         else LBurst.pretrained(default, device=device)
     )
     conv = {"min_size": int, "max_size": int, "scale_factor": float, "rel_thr": float, "rep_thr": float,
-            "published_coordinates": _bool}
+            "published_coordinates": as_bool}
     unknown = set(options) - set(conv)
     if unknown:
         raise ValueError(f"unknown options {sorted(unknown)} for a learned method; known: {sorted(conv)}")

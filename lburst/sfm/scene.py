@@ -14,13 +14,12 @@ image names to COLMAP camera dicts, for scenes whose images come from different 
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
+from lburst.io import natural_key
 from lburst.scenes.reference import Reference
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
@@ -29,11 +28,6 @@ REFERENCE_FILE = "reference.json"
 
 class SceneError(ValueError):
     """A scene folder (or one of its items) that cannot be used; the message names it."""
-
-
-def natural_key(text: str) -> list:
-    """Sort key putting ``img2`` before ``img10``."""
-    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", text)]
 
 
 @dataclass(frozen=True)
@@ -97,18 +91,13 @@ def list_scene(root: str | Path) -> Scene:
 
 def read_image(path: Path) -> np.ndarray:
     """An image file as RGB ``(H, W, 3)`` uint8 or uint16; ``SceneError`` naming the file if unreadable."""
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise SceneError(f"{path}: cannot be read as an image")
-    if image.dtype not in (np.uint8, np.uint16):
-        raise SceneError(f"{path}: unsupported pixel type {image.dtype} (need 8 or 16 bit)")
-    if image.ndim == 2:
-        image = np.repeat(image[:, :, None], 3, axis=2)
-    elif image.shape[2] == 4:
-        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
-    else:
-        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
-    return image
+    from lburst.io import BurstError
+    from lburst.io import read_image as read_rgb
+
+    try:
+        return read_rgb(path)
+    except BurstError as err:
+        raise SceneError(str(err)) from err
 
 
 def load_item(item: SceneItem) -> np.ndarray:
