@@ -25,7 +25,7 @@ from lburst.model import CheckpointError, load_checkpoint
 def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Path:
     """Export the checkpoint's fast network to ``out`` (atomically)."""
     net, _ = load_checkpoint(checkpoint, "cpu")
-    core = CoreModule(FastLBurstNet(net).eval()).eval()
+    core = CoreModule(FastLBurstNet(net, tiled=False).eval()).eval()  # one graph for any size
     example = torch.randn(1, net.config.in_channels, 96, 128)
     height, width = torch.export.Dim("height", min=32, max=8192), torch.export.Dim("width", min=32, max=8192)
     out = Path(out)

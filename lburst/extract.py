@@ -195,6 +195,8 @@ class LBurst:
 
     def _extract(self, x: torch.Tensor, cfg: MultiScaleConfig) -> Features:
         height, width = x.shape[-2:]
+        if cfg.fast and self.net is not None:  # channels-last once: each level is resized in that layout
+            x = x.contiguous(memory_format=torch.channels_last)
         long_side = max(height, width)
         xs, ys, scales, scores, descs = [], [], [], [], []
         s = 1.0

@@ -4,12 +4,12 @@ What it changes, none of which changes the result beyond float rounding:
 
 - BatchNorm (no affine, running statistics) is folded into the preceding conv;
 - tensors are channels-last, which oneDNN convolves without reordering;
-- the repeatability and reliability heads are computed from the *half-resolution*
-  raw map: the x2 bilinear upsampling is linear, so ``W . (U x)^2`` expands into
-  weighted sums of ``W . (x_i * x_j)`` over the 2x2 cell of half-resolution pixels
-  that each output pixel interpolates; those five 3-channel maps (self, right, down,
-  diagonal, anti-diagonal products) are cheap, and the 128-channel full-resolution
-  map is never built;
+- on the CPU, the full-resolution layers (three 3x3 convs and the max-pool) run in
+  stripes of rows, with one row of context per conv, so their maps stay in the cache
+  (see :meth:`FastLBurstNet._striped_front`);
+- the repeatability and reliability heads (upsampling, squaring, 1x1 projection) run
+  in bands of a few rows, so the 128-channel full-resolution map is never built whole
+  and each band stays in the cache (see :meth:`FastLBurstNet._heads`);
 - descriptors are only interpolated and normalised at the keypoints.
 
 Outputs are those of :class:`LBurstNet` at even input sizes (``(B, 1, H, W)`` maps);
@@ -52,65 +52,106 @@ def fold_batchnorm(ops: nn.ModuleList) -> nn.Sequential:
     return nn.Sequential(*folded)
 
 
-# weights of the two half-resolution rows (or columns) that x2 bilinear upsampling
-# (align_corners=False) blends, in a map padded by one replicated pixel: output 2m uses
-# padded rows (m, m+1) with (1/4, 3/4), output 2m+1 uses (m+1, m+2) with (3/4, 1/4)
-_PARITY_WEIGHTS = ((0.25, 0.75), (0.75, 0.25))
+#: bytes of the largest map of a stripe of the full-resolution layers (32 rows of a
+#: 1024-wide 64-channel map): a stripe's maps then stay in this CPU's L3 cache
+STRIPE_BYTES = 8 << 20
+#: input bytes per band of the head computation (8 rows of a 512-wide 128-D half map):
+#: the band's upsampled map (4x that) then fits in this CPU's L2 and L3 caches
+HEAD_BAND_BYTES = 2 << 20
 
 
 class FastLBurstNet(nn.Module):
     """Inference-only LBurst network; see the module docstring."""
 
-    def __init__(self, net: LBurstNet, precision: str = "fp32") -> None:
+    def __init__(self, net: LBurstNet, precision: str = "fp32", tiled: bool = True,
+                 stripe_rows: int | None = None, head_band_rows: int | None = None) -> None:
+        """``precision``: see :meth:`core`.  ``tiled``: on the CPU, run the full-resolution
+        layers in stripes (:meth:`raw`) and the heads in bands (:meth:`_heads`) so their maps
+        stay in the cache; ``stripe_rows`` and ``head_band_rows`` set the sizes (default:
+        :data:`STRIPE_BYTES` and :data:`HEAD_BAND_BYTES`).  ``tiled=False`` runs every
+        layer on the whole map (one graph for any size, as the ONNX export needs; the GPU
+        path always does)."""
         super().__init__()
         if precision not in ("fp32", "bf16", "fp16"):
             raise ValueError(f"precision must be fp32, bf16 or fp16, got {precision!r}")
+        for name, rows in (("stripe_rows", stripe_rows), ("head_band_rows", head_band_rows)):
+            if rows is not None and (rows < 1 or (name == "stripe_rows" and rows % 2)):
+                raise ValueError(f"{name} must be a positive (for stripes: even) number of rows, got {rows}")
         self.precision = precision
+        self.tiled = tiled
+        self.stripe_rows = stripe_rows
+        self.head_band_rows = head_band_rows
         self.config = net.config
         self.body = fold_batchnorm(net.ops).eval().to(memory_format=torch.channels_last)
+        pool = next(i for i, op in enumerate(self.body) if isinstance(op, nn.MaxPool2d))
+        self.front = [op for op in self.body[:pool] if isinstance(op, nn.Conv2d)]  # each followed by a ReLU
+        if any(c.kernel_size != (3, 3) or c.dilation != (1, 1) or c.padding != (1, 1) for c in self.front):
+            raise ValueError("striped layers must be 3x3 convs with padding 1")
+        self.back = self.body[pool + 1 :]
         heads = torch.cat([net.sal.weight, net.clf.weight])[:, :, 0, 0]  # (3, D): sal, clf0, clf1
         self.register_buffer("head_weight", heads.detach().clone())
         self.register_buffer("head_bias", torch.cat([net.sal.bias, net.clf.bias]).detach().clone())
 
+    def _tiled(self, x: torch.Tensor) -> bool:
+        return self.tiled and x.device.type == "cpu"
+
     def raw(self, x: torch.Tensor) -> torch.Tensor:
         """The half-resolution raw descriptor map (B, D, H//2, W//2)."""
-        return self.body(x.contiguous(memory_format=torch.channels_last))
+        x = x.contiguous(memory_format=torch.channels_last)
+        if not self._tiled(x):
+            return self.body(x)
+        return self.back(self._striped_front(x))
+
+    def _striped_front(self, x: torch.Tensor) -> torch.Tensor:
+        """The full-resolution 3x3 conv + ReLU layers and the 2x2 max-pool, in stripes of rows.
+
+        A stripe of output rows ``[r0, r1)`` (``r0`` even, so the pool pairs the same rows)
+        reads one input row of context per conv above and below it.  Inside the image each
+        conv uses up one context row on that side; where the stripe reaches the image's top
+        or bottom, each conv pads that side with zeros as the whole-map conv does.  Every
+        output row then sees exactly what it sees in the whole map."""
+        height, width = x.shape[-2:]
+        channels = max(c.out_channels for c in self.front)
+        rows = self.stripe_rows or max(2, STRIPE_BYTES // (4 * channels * width) // 2 * 2)
+        halo = len(self.front)
+        stripes, pooled_rows = [], height // 2 * 2  # the pool drops an odd last row (still context)
+        for r0 in range(0, pooled_rows, rows):
+            r1 = min(pooled_rows, r0 + rows)
+            a, z = max(r0 - halo, 0), min(r1 + halo, height)
+            top, bottom = int(a == 0), int(z == height)  # image borders: zero padding at every conv
+            y = x[:, :, a:z]
+            for conv in self.front:
+                y = F.conv2d(F.pad(y, (0, 0, top, bottom)) if top or bottom else y, conv.weight, conv.bias,
+                             padding=(0, 1)).relu_()
+            first = a if top else a + halo  # image row of y's first row
+            stripes.append(F.max_pool2d(y[:, :, r0 - first : r1 - first], 2))
+        return torch.cat(stripes, dim=2)
 
     def _heads(self, half: torch.Tensor) -> torch.Tensor:
-        """Head pre-activations (B, 3, 2h, 2w) of the upsampled map, from the half map (B, D, h, w)."""
-        # channels-last (B, h, w, D) views: the products and projections stream through memory
-        p = F.pad(half, (1, 1, 1, 1), mode="replicate").permute(0, 2, 3, 1).contiguous()
-        bsz, h, w = half.shape[0], half.shape[-2], half.shape[-1]
-        weight_t = self.head_weight.t().contiguous()
+        """Head pre-activations (B, 3, 2h, 2w) of the x2-upsampled map, from the half map (B, D, h, w).
 
-        def proj(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:  # (B, *, *, 3)
-            return torch.matmul(a * b, weight_t)
-
-        s = proj(p, p)  # (h+2, w+2)
-        right = proj(p[:, :, :-1], p[:, :, 1:])  # (h+2, w+1)
-        down = proj(p[:, :-1, :], p[:, 1:, :])  # (h+1, w+2)
-        cross = proj(p[:, :-1, :-1], p[:, 1:, 1:]) + proj(p[:, :-1, 1:], p[:, 1:, :-1])  # diagonals (h+1, w+1)
-        rows = []
-        for py, (a0, a1) in enumerate(_PARITY_WEIGHTS):
-            r, r1 = slice(py, py + h), slice(py + 1, py + 1 + h)
-            cols = []
-            for px, (b0, b1) in enumerate(_PARITY_WEIGHTS):
-                c, c1 = slice(px, px + w), slice(px + 1, px + 1 + w)
-                cols.append(
-                    (a0 * b0) ** 2 * s[:, r, c]
-                    + (a0 * b1) ** 2 * s[:, r, c1]
-                    + (a1 * b0) ** 2 * s[:, r1, c]
-                    + (a1 * b1) ** 2 * s[:, r1, c1]
-                    + 2 * a0 * a0 * b0 * b1 * right[:, r, c]
-                    + 2 * a1 * a1 * b0 * b1 * right[:, r1, c]
-                    + 2 * a0 * a1 * b0 * b0 * down[:, r, c]
-                    + 2 * a0 * a1 * b1 * b1 * down[:, r, c1]
-                    + 2 * a0 * a1 * b0 * b1 * cross[:, r, c]
-                )
-            rows.append(torch.stack(cols, dim=3))  # (B, h, w, 2, 3): column parity
-        out = torch.stack(rows, dim=2)  # (B, h, 2, w, 2, 3): output pixel (2m + py, 2n + px)
-        out = out.reshape(bsz, 2 * h, 2 * w, 3) + self.head_bias
-        return out.permute(0, 3, 1, 2)
+        The map is upsampled, squared and projected in bands of rows, so the 128-channel
+        full-resolution map never leaves the cache.  Each band is upsampled with one
+        half-resolution row of context above and below (where the map has one), and the
+        two output rows that context adds on each side are dropped: the band starts an
+        even number of output rows into the map, so every kept row is interpolated with
+        the same weights, and at the map's border the same clamp, as in the whole map.
+        The result equals upsampling the whole map up to the order of float sums.
+        """
+        weight = self.head_weight[:, :, None, None]
+        if not self._tiled(half):
+            up = F.interpolate(half, scale_factor=2.0, mode="bilinear", align_corners=False)
+            return F.conv2d(up * up, weight, self.head_bias)
+        dim, h, w = half.shape[1:]
+        rows = self.head_band_rows or max(1, HEAD_BAND_BYTES // (4 * dim * w))
+        bands = []
+        for r0 in range(0, h, rows):
+            r1 = min(h, r0 + rows)
+            a, z = max(r0 - 1, 0), min(r1 + 1, h)  # with context rows
+            up = F.interpolate(half[:, :, a:z], scale_factor=2.0, mode="bilinear", align_corners=False)
+            up = up[:, :, 2 * (r0 - a) : up.shape[2] - 2 * (z - r1)]
+            bands.append(F.conv2d(up * up, weight, self.head_bias))
+        return torch.cat(bands, dim=2)
 
     def core(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(repeatability, reliability, half)`` at the network's output size ``2 * (H // 2)``.

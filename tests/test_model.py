@@ -57,8 +57,13 @@ def test_published_frame_order():
         frame_permutation(5, "reversed")
 
 
+TILINGS = {"default tiles": {}, "bands of 3 rows": {"head_band_rows": 3}, "stripes of 4 rows": {"stripe_rows": 4},
+           "whole map": {"tiled": False}}
+
+
+@pytest.mark.parametrize("tiling", TILINGS.values(), ids=TILINGS.keys())
 @pytest.mark.parametrize("size", [(75, 98), (64, 80)])
-def test_fast_network_matches_the_plain_one(size):
+def test_fast_network_matches_the_plain_one(size, tiling):
     """Same maps and descriptors (the keypoint identity is checked on the reference burst above)."""
     from lburst.fast import FastLBurstNet, descriptors_at
 
@@ -71,12 +76,49 @@ def test_fast_network_matches_the_plain_one(size):
     x = torch.randn(1, 9, *size)
     with torch.inference_mode():
         plain = net(x)
-        rep, rel, half = FastLBurstNet(net)(x)
+        rep, rel, half = FastLBurstNet(net, **tiling)(x)
         torch.testing.assert_close(rep, plain["repeatability"], atol=1e-5, rtol=0)
         torch.testing.assert_close(rel, plain["reliability"], atol=1e-5, rtol=0)
         yy, xx = torch.meshgrid(torch.arange(size[0] // 2 * 2), torch.arange(size[1] // 2 * 2), indexing="ij")
         desc = descriptors_at(half, yy.flatten(), xx.flatten())
         torch.testing.assert_close(desc, plain["descriptors"][0, :, yy.flatten(), xx.flatten()].t(), atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("rows", [1, 3, 8])
+def test_banded_heads_match_the_whole_map(rows):
+    """Bands of 1, 3 (not dividing 37) and 8 rows, each cut with its context rows."""
+    from lburst.fast import FastLBurstNet
+
+    torch.manual_seed(0)
+    net = LBurstNet(NetConfig(frames=1)).eval()
+    half = torch.randn(1, 128, 37, 29).contiguous(memory_format=torch.channels_last)
+    with torch.inference_mode():
+        whole = FastLBurstNet(net, tiled=False)._heads(half)
+        banded = FastLBurstNet(net, head_band_rows=rows)._heads(half)
+    assert banded.shape == whole.shape == (1, 3, 74, 58)
+    torch.testing.assert_close(banded, whole, atol=1e-6, rtol=1e-6)  # the same sums; oneDNN may order them otherwise
+
+
+@pytest.mark.parametrize("rows", [2, 4, 6, 200])
+def test_striped_front_layers_match_the_whole_map(rows):
+    """Stripes of 2 to 6 rows (the first and last touch the zero padding) and one stripe, odd height."""
+    from lburst.fast import FastLBurstNet
+
+    torch.manual_seed(0)
+    fast = FastLBurstNet(LBurstNet(NetConfig(frames=1)).eval(), stripe_rows=rows)
+    x = torch.randn(1, 3, 75, 42).contiguous(memory_format=torch.channels_last)
+    with torch.inference_mode():
+        whole = fast.body[: len(fast.body) - len(fast.back)](x)
+        striped = fast._striped_front(x)
+    assert striped.shape == whole.shape == (1, 64, 37, 21)
+    torch.testing.assert_close(striped, whole, atol=1e-6, rtol=1e-6)
+
+
+def test_stripes_must_have_an_even_number_of_rows():
+    from lburst.fast import FastLBurstNet
+
+    with pytest.raises(ValueError, match="stripe_rows"):
+        FastLBurstNet(LBurstNet(NetConfig(frames=1)), stripe_rows=3)
 
 
 def test_odd_sizes_give_full_size_maps_with_no_keypoints_on_the_missing_row():
@@ -147,3 +189,13 @@ def test_images_smaller_than_min_size_are_processed_at_their_own_size():
     image = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
     feats = model.extract(image, rel_thr=0, rep_thr=0)
     assert len(feats["keypoints"]) > 0 and set(feats["scales"]) == {32.0}
+
+
+def test_learned_method_spec_sets_the_precision_and_rejects_unknown_ones(tmp_path):
+    from lburst.methods import create
+
+    save_checkpoint(LBurstNet(NetConfig(frames=1)), tmp_path / "net.pt")
+    extractor = create(f"lburst:{tmp_path / 'net.pt'},precision=bf16,fast=true")
+    assert extractor.options == {"precision": "bf16", "fast": True}
+    with pytest.raises(ValueError, match="precision must be fp32, bf16 or fp16"):
+        create(f"lburst:{tmp_path / 'net.pt'},precision=int8")
