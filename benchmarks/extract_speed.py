@@ -1,11 +1,13 @@
 """Extraction speed: seconds per 5-frame burst at a 1024 px long side, per path.
 
 Paths: ``plain`` (the network run as the published code runs it: NCHW, full-resolution
-128-D maps at every level), ``fast`` (lburst's default, same features), and, when
-asked, ``bf16`` (bfloat16 autocast of the backbone, heads in fp32).  Each path runs in
-its own process so its peak memory can be read; times are medians of ``--repeats``
-runs after one warm-up, on random weights unless ``--weights`` is given (the time does
-not depend on the weights, the keypoint count does).
+128-D maps at every level), ``fast`` (lburst's default, same features), ``bf16``
+(bfloat16 autocast of the backbone, heads in fp32) and ``onnx`` (the fast network
+exported by ``lburst export onnx``, run by ONNX Runtime).  Each path runs in its own
+process so its peak memory can be read; times are medians of ``--repeats`` runs after
+one warm-up, on random weights unless ``--weights`` is given (the time does not depend
+on the weights, the keypoint count does).  ``bf16`` and ``onnx`` also report the share
+of their keypoints within 1 px of a fast fp32 keypoint.
 
     python benchmarks/extract_speed.py --out outputs/extract_speed.json
 """
@@ -24,6 +26,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+
+PATHS = ("plain", "fast", "bf16", "onnx")
 
 
 def _make_burst(size: tuple[int, int], frames: int) -> np.ndarray:
@@ -53,6 +58,9 @@ def run_child(path: str, args: argparse.Namespace) -> dict:
     options = {"fast": path != "plain", "precision": "bf16" if path == "bf16" else "fp32"}
     if path == "plain":
         model.net.to(memory_format=torch.contiguous_format)
+    reference_model = model
+    if path == "onnx":
+        model = LBurst.from_onnx(args.onnx_model, threads=args.threads)
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     times, count = [], 0
     for i in range(args.repeats + 1):
@@ -65,15 +73,15 @@ def run_child(path: str, args: argparse.Namespace) -> dict:
         if i:
             times.append(time.perf_counter() - start)
         count = len(feats["scores"])
-    if path == "bf16":  # agreement with fp32: share of keypoints within 1 px of an fp32 keypoint
+    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    if path in ("bf16", "onnx"):  # agreement with fp32: share of keypoints within 1 px of an fp32 keypoint
         from scipy.spatial import cKDTree
 
-        ref = model.extract(burst, top_k=args.top_k)
+        ref = reference_model.extract(burst, top_k=args.top_k)
         dist, _ = cKDTree(ref["keypoints"]).query(feats["keypoints"])
-        agreement = float((dist <= 1).mean())
+        agreement = float((dist <= 1).mean()) if len(dist) else None
     else:
         agreement = None
-    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     result = {"path": path, "median_s": statistics.median(times), "times_s": times, "keypoints": count,
               "peak_rss_mb": rss1 / 1024, "extra_rss_mb": (rss1 - rss0) / 1024, "agreement_1px": agreement}
     if device.startswith("cuda"):
@@ -91,9 +99,19 @@ def _cpu_name() -> str:
     return platform.processor() or "cpu"
 
 
+def _cpu_flags() -> str:
+    """The CPU's bf16 instructions (AMX or AVX512-BF16), which decide whether bf16 pays."""
+    try:
+        flags = next(line for line in Path("/proc/cpuinfo").read_text().splitlines() if line.startswith("flags")).split()
+    except (OSError, StopIteration):
+        return "unknown"
+    found = [f for f in ("amx_bf16", "avx512_bf16") if f in flags]
+    return ", ".join(found) or "none"
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--paths", nargs="+", default=["plain", "fast"], choices=["plain", "fast", "bf16"])
+    p.add_argument("--paths", nargs="+", default=list(PATHS), choices=PATHS)
     p.add_argument("--weights", help="checkpoint (default: random weights)")
     p.add_argument("--height", type=int, default=768)
     p.add_argument("--width", type=int, default=1024)
@@ -103,19 +121,39 @@ def main() -> int:
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--out", type=Path, help="JSON results")
     p.add_argument("--child", help=argparse.SUPPRESS)
+    p.add_argument("--onnx-model", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
         print(json.dumps(run_child(args.child, args)))
         return 0
+    extra = []
+    if "onnx" in args.paths:  # export here, so the onnx child's peak memory is that of running it
+        import tempfile
+
+        from lburst.export_onnx import export_onnx
+        from lburst.model import LBurstNet, NetConfig, save_checkpoint
+
+        folder = Path(tempfile.mkdtemp(prefix="lburst-speed-"))
+        checkpoint = args.weights
+        if not checkpoint:
+            torch.manual_seed(0)
+            checkpoint = folder / "random.pt"
+            save_checkpoint(LBurstNet(NetConfig(frames=5)), checkpoint)
+        extra = ["--onnx-model", str(export_onnx(checkpoint, folder / "model.onnx"))]
     results = []
     for path in args.paths:
-        cmd = [sys.executable, __file__, "--child", path] + sys.argv[1:]
+        cmd = [sys.executable, __file__, "--child", path] + sys.argv[1:] + extra
         out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
         results.append(json.loads(out.strip().splitlines()[-1]))
+    if extra:
+        import shutil
+
+        shutil.rmtree(Path(extra[1]).parent, ignore_errors=True)
     base = next((r["median_s"] for r in results if r["path"] == "plain"), None)
     device = torch.cuda.get_device_name() if args.device.startswith("cuda") else _cpu_name()
-    print(f"\n5-frame burst {args.width}x{args.height}, {args.device} ({device}), {args.threads} threads, "
-          f"median of {args.repeats}\n")
+    flags = _cpu_flags()
+    print(f"\n5-frame burst {args.width}x{args.height}, {args.device} ({device}; native bf16: {flags}), "
+          f"{args.threads} threads, median of {args.repeats}\n")
     print("| path | s / burst | speed-up vs plain | keypoints | within 1 px of fp32 | peak RSS MB |")
     print("|---|---|---|---|---|---|")
     for r in results:
@@ -124,7 +162,7 @@ def main() -> int:
         print(f"| {r['path']} | {r['median_s']:.2f} | {ratio} | {r['keypoints']} | {agree} | {r['peak_rss_mb']:.0f} |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"device": device, "threads": args.threads, "size": [args.width, args.height],
+        args.out.write_text(json.dumps({"device": device, "bf16_hardware": flags, "threads": args.threads, "size": [args.width, args.height],
                                         "results": results}, indent=2))
     return 0
 

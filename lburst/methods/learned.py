@@ -23,6 +23,12 @@ class LearnedExtractor:
         return self.model.extract(burst, top_k=self.top_k, **self.options)
 
 
+def _precision(value: str) -> str:
+    if value not in ("fp32", "bf16", "fp16"):
+        raise ValueError(f"precision must be fp32, bf16 or fp16, got {value!r}")
+    return value
+
+
 def _make(arg: str | None, default: str, device=None, frame_order: str = "temporal", top_k="4000", **options):
     model = (
         LBurst.from_checkpoint(arg, device=device, frame_order=frame_order)
@@ -30,7 +36,7 @@ def _make(arg: str | None, default: str, device=None, frame_order: str = "tempor
         else LBurst.pretrained(default, device=device)
     )
     conv = {"min_size": int, "max_size": int, "scale_factor": float, "rel_thr": float, "rep_thr": float,
-            "published_coordinates": as_bool}
+            "published_coordinates": as_bool, "fast": as_bool, "precision": _precision}
     unknown = set(options) - set(conv)
     if unknown:
         raise ValueError(f"unknown options {sorted(unknown)} for a learned method; known: {sorted(conv)}")
