@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 
-def measure(frames: int, batch: int, crop: int, steps: int, device: str) -> dict:
+def measure(frames: int, batch: int, crop: int, steps: int, device: str, precision: str = "fp32") -> dict:
     import skimage.data
 
     from lburst.model import LBurstNet, NetConfig
@@ -47,7 +47,7 @@ def measure(frames: int, batch: int, crop: int, steps: int, device: str) -> dict
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         t = time.perf_counter()
-        losses = training_step(net, batch_t, 16)
+        losses = training_step(net, batch_t, 16, precision=precision)
         opt.zero_grad(set_to_none=True)
         losses["loss"].backward()
         opt.step()
@@ -56,7 +56,7 @@ def measure(frames: int, batch: int, crop: int, steps: int, device: str) -> dict
         if i:
             times.append(time.perf_counter() - t)
     step_s = statistics.median(times)
-    return {"frames": frames, "batch": batch, "crop": crop, "device": device, "step_s": step_s,
+    return {"frames": frames, "batch": batch, "crop": crop, "device": device, "precision": precision, "step_s": step_s,
             "steps_per_s": 1 / step_s, "pairs_per_s": batch / step_s, "pair_s": pair_s}
 
 
@@ -66,16 +66,18 @@ def main() -> int:
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--crop", type=int, default=192)
     p.add_argument("--steps", type=int, default=3)
+    p.add_argument("--precision", nargs="+", default=["fp32"], choices=["fp32", "bf16", "fp16"],
+                   help="autocast of the forward pass (each is measured)")
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--out", type=Path)
     args = p.parse_args()
-    rows = [measure(n, args.batch, args.crop, args.steps, args.device) for n in args.frames]
+    rows = [measure(n, args.batch, args.crop, args.steps, args.device, prec) for n in args.frames for prec in args.precision]
     print(f"\ntraining step, batch {args.batch} pairs of {args.crop} px crops, {args.device}, "
           f"{torch.get_num_threads()} threads, median of {args.steps}\n")
-    print("| frames | s / step | steps / s | pairs / s | s / pair generated (1 worker) |")
-    print("|---|---|---|---|---|")
+    print("| frames | precision | s / step | steps / s | pairs / s | s / pair generated (1 worker) |")
+    print("|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['frames']} | {r['step_s']:.2f} | {r['steps_per_s']:.3f} | {r['pairs_per_s']:.2f} | {r['pair_s']:.3f} |")
+        print(f"| {r['frames']} | {r['precision']} | {r['step_s']:.2f} | {r['steps_per_s']:.3f} | {r['pairs_per_s']:.2f} | {r['pair_s']:.3f} |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(rows, indent=2))

@@ -40,7 +40,10 @@ class TrainConfig:
     trains descriptors only through ``AP * rel``: when AP starts below the base (0.5),
     as it does under heavy noise, reliability collapses to 0 and descriptors stop
     learning (seen here: a single-image run stuck at AP 0.08 for 13k steps, a burst run
-    stuck until step 7.6k).  The unweighted term keeps them learning; 0 is the paper."""
+    stuck until step 7.6k).  The unweighted term keeps them learning; 0 is the paper.
+
+    ``precision`` ``'bf16'`` (or ``'fp16'`` on a GPU) runs the network's forward pass under
+    autocast; the losses are computed in fp32 from its outputs."""
 
     frames: int = 5
     batch_size: int = 4
@@ -55,6 +58,7 @@ class TrainConfig:
     workers: int = 1
     threads: int | None = None
     checkpoint_every_s: float = 300.0
+    precision: str = "fp32"
     pair: PairConfig = field(default_factory=PairConfig)
 
 
@@ -83,15 +87,23 @@ def _normalise(burst: torch.Tensor) -> torch.Tensor:
     return x.flatten(1, 2)
 
 
+AUTOCAST_DTYPES = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
+
+
 def training_step(
     net: torch.nn.Module, batch: dict[str, torch.Tensor], patch: int, generator: torch.Generator | None = None,
-    ap_weight: float = 0.0,
+    ap_weight: float = 0.0, precision: str = "fp32",
 ) -> dict[str, torch.Tensor]:
-    """Losses of one batch (both bursts through the net in one pass)."""
+    """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``)."""
+    if precision not in AUTOCAST_DTYPES:
+        raise ValueError(f"precision must be one of {sorted(AUTOCAST_DTYPES)}, got {precision!r}")
     n = batch["burst_a"].shape[0]
     x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
-    out = net(x.contiguous(memory_format=torch.channels_last))
-    desc, rep, rel = out["descriptors"], out["repeatability"], out["reliability"]
+    x = x.contiguous(memory_format=torch.channels_last)
+    dtype = AUTOCAST_DTYPES[precision]
+    with torch.autocast(device_type=x.device.type, dtype=dtype, enabled=dtype is not None):
+        out = net(x)
+    desc, rep, rel = (out[k].float() for k in ("descriptors", "repeatability", "reliability"))
     flow, mask = batch["flow"], batch["mask"]
     cosim = cosim_loss(rep[:n], rep[n:], flow, mask, patch)
     peaky = (peaky_loss(rep[:n], patch) + peaky_loss(rep[n:], patch)) / 2
@@ -201,7 +213,7 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
         if cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s:
             break
         batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
-        losses = training_step(net, batch, cfg.patch, generator, cfg.ap_weight)
+        losses = training_step(net, batch, cfg.patch, generator, cfg.ap_weight, cfg.precision)
         optimizer.zero_grad(set_to_none=True)
         losses["loss"].backward()
         optimizer.step()
@@ -235,6 +247,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-budget", type=float, help="stop (resumably) after this many seconds")
     p.add_argument("--workers", type=int)
     p.add_argument("--threads", type=int, help="torch threads")
+    p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
     p.add_argument("--seed", type=int)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument("--device")
@@ -244,7 +257,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     cfg = replace(TrainConfig(), **PRESETS[args.preset])
     overrides = {"frames": args.frames, "steps": args.steps, "batch_size": args.batch_size,
                  "time_budget_s": args.time_budget, "workers": args.workers, "threads": args.threads,
-                 "seed": args.seed}
+                 "seed": args.seed, "precision": args.precision}
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
     if args.frames is not None:
