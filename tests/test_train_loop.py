@@ -48,7 +48,7 @@ def test_a_few_steps_on_one_batch_lower_the_loss(photos):
 
 
 def test_stopped_and_resumed_run_matches_an_uninterrupted_one(photos, tmp_path):
-    cfg = TrainConfig(frames=3, batch_size=2, steps=4, patch=8, workers=0, pair=TINY)
+    cfg = TrainConfig(frames=3, batch_size=2, steps=4, patch=8, workers=0, pair=TINY, snapshot_every=2)
     train([photos], tmp_path / "full", cfg, progress=False)
     train([photos], tmp_path / "split", replace(cfg, steps=2), progress=False)
     with pytest.raises(FileExistsError, match="--resume"):
@@ -65,6 +65,12 @@ def test_stopped_and_resumed_run_matches_an_uninterrupted_one(photos, tmp_path):
         torch.testing.assert_close(a["state_dict"][k], b["state_dict"][k], atol=1e-4, rtol=1e-4, msg=k)
     net, extra = load_checkpoint(tmp_path / "full" / "final.pt")  # the published layout
     assert extra["net"] == "Fast_Quad_L2Net_ConfCFS(inchan=9)"
+    for run in ("full", "split"):  # snapshots every 2 steps, across the resume too
+        snaps = sorted(p.name for p in (tmp_path / run / "snapshots").iterdir())
+        assert snaps == ["step_000002.pt", "step_000004.pt"], run
+    last_snapshot, _ = load_checkpoint(tmp_path / "full" / "snapshots" / "step_000004.pt")
+    for k, v in net.state_dict().items():
+        torch.testing.assert_close(last_snapshot.state_dict()[k], v, atol=0, rtol=0, msg=k)
 
 
 def test_training_pairs_flow_maps_a_onto_b(photos):

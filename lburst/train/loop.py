@@ -42,6 +42,10 @@ class TrainConfig:
     learning (seen here: a single-image run stuck at AP 0.08 for 13k steps, a burst run
     stuck until step 7.6k).  The unweighted term keeps them learning; 0 is the paper.
 
+    ``snapshot_every`` (steps) also keeps the weights at every multiple of it as
+    ``snapshots/step_XXXXXX.pt`` in the published layout (a few MB each), so the
+    benchmark can follow a run's progress.
+
     ``precision`` ``'bf16'`` (or ``'fp16'`` on a GPU) runs the network's forward pass under
     autocast; the losses are computed in fp32 from its outputs."""
 
@@ -58,6 +62,7 @@ class TrainConfig:
     workers: int = 1
     threads: int | None = None
     checkpoint_every_s: float = 300.0
+    snapshot_every: int | None = None
     precision: str = "fp32"
     pair: PairConfig = field(default_factory=PairConfig)
 
@@ -177,7 +182,8 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
         state = torch.load(last, map_location="cpu", weights_only=True)
         saved = _config_from_dict(dict(state["config"]))
         cfg = replace(saved, time_budget_s=cfg.time_budget_s, steps=cfg.steps, epochs=cfg.epochs,
-                      workers=cfg.workers, threads=cfg.threads, checkpoint_every_s=cfg.checkpoint_every_s)
+                      workers=cfg.workers, threads=cfg.threads, checkpoint_every_s=cfg.checkpoint_every_s,
+                      snapshot_every=cfg.snapshot_every or saved.snapshot_every)
     elif last.is_file():
         raise FileExistsError(f"{last} exists: pass --resume to continue it, or choose another --out")
     photos = list_photos([Path(p) for p in photo_folders])
@@ -223,6 +229,8 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
         log.append(row)
         bar.update(1)
         bar.set_postfix({k: f"{float(v.detach()):.3f}" for k, v in losses.items()})
+        if cfg.snapshot_every and step % cfg.snapshot_every == 0:
+            save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta={"step": step})
         if time.monotonic() - last_save > cfg.checkpoint_every_s:
             save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
             _write_log(out / "log.csv", log)
@@ -247,6 +255,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-budget", type=float, help="stop (resumably) after this many seconds")
     p.add_argument("--workers", type=int)
     p.add_argument("--threads", type=int, help="torch threads")
+    p.add_argument("--snapshot-every", type=int, help="keep the weights every this many steps (snapshots/)")
     p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
     p.add_argument("--seed", type=int)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -257,7 +266,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     cfg = replace(TrainConfig(), **PRESETS[args.preset])
     overrides = {"frames": args.frames, "steps": args.steps, "batch_size": args.batch_size,
                  "time_budget_s": args.time_budget, "workers": args.workers, "threads": args.threads,
-                 "seed": args.seed, "precision": args.precision}
+                 "seed": args.seed, "precision": args.precision, "snapshot_every": args.snapshot_every}
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
     if args.frames is not None:
