@@ -49,6 +49,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--h5", action="store_true", help="also write an hloc-style features.h5 in --out")
     p.add_argument("--overwrite", action="store_true", help="recompute bursts that are already done")
     p.add_argument("--device", help="cpu or cuda (default: cuda if available)")
+    p.add_argument("--precision", choices=["fp32", "bf16", "fp16"], default="fp32",
+                   help="backbone precision of learned methods: bf16 is faster on CPUs with AVX512-BF16 or AMX "
+                        "(heads stay fp32; about 99%% of keypoints within 1 px of fp32), fp16 on a GPU")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -58,6 +61,8 @@ def main(args: argparse.Namespace) -> int:
         options["top_k"] = str(args.top_k)
         if args.device:
             options["device"] = args.device
+        if args.precision != "fp32":
+            options["precision"] = args.precision
     try:
         extractor = create(spec, **options)
     except (CheckpointError, FileNotFoundError, ValueError) as exc:
