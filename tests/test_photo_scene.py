@@ -71,3 +71,36 @@ def test_no_photos(tmp_path):
 
     with pytest.raises(SceneError, match="no bursts"):
         simulate_scene(tmp_path, tmp_path / "out", progress=False)
+
+
+def test_reference_options_are_kept_and_a_change_remakes_the_reference(photos):
+    from lburst.scenes.photo_scene import REFERENCE_DIR, non_default_options, reference_options_used
+
+    out = photos / "scene_single"
+    ref = simulate_scene(photos / "photos", out, frames=3, noise="gaussian:10", progress=False,
+                         reference_options={"single_camera": True, "num_threads": 2})
+    assert ref is not None and len(ref.poses) == 6
+    assert reference_options_used(out) == {"single_camera": True}  # defaults are not recorded
+    cameras = reference_cameras(out / "reference.json")
+    assert len({str(c["params"]) for c in cameras.values()}) == 1  # one shared camera
+    stamp = (out / "reference.json").stat().st_mtime_ns
+    simulate_scene(photos / "photos", out, frames=3, noise="gaussian:10", progress=False,
+                   reference_options={"single_camera": True})
+    assert (out / "reference.json").stat().st_mtime_ns == stamp  # same options: reused
+    simulate_scene(photos / "photos", out, frames=3, noise="gaussian:10", progress=False)
+    assert reference_options_used(out) == {} and (out / REFERENCE_DIR / "options.json").is_file()
+    assert len({str(c["params"]) for c in reference_cameras(out / "reference.json").values()}) == 6
+    # the CLI's defaults are the defaults: a reference made before the options existed is reused
+    assert non_default_options({"single_camera": False, "fix_intrinsics": False, "num_threads": 2}) == {}
+
+
+def test_cli_reference_options():
+    import argparse
+
+    from lburst.scenes.photo_scene import configure_parser
+
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    args = parser.parse_args(["photos", "--out", "scene", "--reference-single-camera", "--reference-fix-intrinsics"])
+    assert args.reference_single_camera and args.reference_fix_intrinsics and args.reference_threads == 2
+    assert "--reference-single-camera" in parser.format_help()

@@ -11,11 +11,23 @@ The reference poses are the reconstruction of the *clean* photos with SIFT throu
 their refined cameras in ``cameras`` (per image, exact COLMAP model), ``camera`` the
 first one as a ``PINHOLE`` approximation (its distortion dropped), and ``length`` the
 path length through the camera centres in scene order (model units).
+
+``reference_options`` are :class:`lburst.sfm.ReconstructOptions` fields for that clean
+reconstruction, e.g. ``single_camera=True`` and ``fix_intrinsics=True``
+(``--reference-single-camera --reference-fix-intrinsics``) for a set shot with one camera
+under forward motion, where bundle adjustment lets the focal length and distortion drift
+and registration stops (``lund``, one phone on a forward walk, on 2 threads: 23/29
+photos with one camera per photo, whose focal lengths spread from 178 to 1313 px; 6/29
+with one shared refined camera; 29/29 with the shared camera kept at its EXIF focal
+length).  Their non-default values are saved in
+``SCENE/.reference/options.json``; a re-run reuses the reference only when they are the
+same, else it reconstructs the clean photos again (the SIFT features stay cached).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import sys
 import tempfile
@@ -25,6 +37,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from lburst.io import atomic_path
 from lburst.scenes.reference import Reference
 from lburst.sfm.poses import path_length
 from lburst.sfm.scene import SceneError, list_scene, read_image, save_reference
@@ -32,6 +45,7 @@ from lburst.sfm.scene import SceneError, list_scene, read_image, save_reference
 REFERENCE_METHOD = "sift"
 REFERENCE_SOURCE = "sift-clean"
 REFERENCE_DIR = ".reference"
+REFERENCE_OPTIONS_FILE = "options.json"
 
 
 def frame_name(k: int) -> str:
@@ -72,6 +86,8 @@ def make_reference(photos: Path, scene_dir: Path, progress: bool = True, **optio
     from lburst.sfm.reconstruct import reconstruct_scene
 
     result = reconstruct_scene(photos, REFERENCE_METHOD, scene_dir / REFERENCE_DIR, progress=progress, **options)
+    with atomic_path(scene_dir / REFERENCE_DIR / REFERENCE_OPTIONS_FILE) as tmp:
+        tmp.write_text(json.dumps(non_default_options(options), indent=1, sort_keys=True))
     if not result.registered:
         return None
     order = [n for n in result.names if n in result.poses]
@@ -82,12 +98,29 @@ def make_reference(photos: Path, scene_dir: Path, progress: bool = True, **optio
     return reference
 
 
+def non_default_options(options: dict) -> dict:
+    """``options`` without the fields equal to :class:`lburst.sfm.ReconstructOptions`' defaults."""
+    from dataclasses import MISSING, fields
+
+    from lburst.sfm.reconstruct import ReconstructOptions
+
+    defaults = {f.name: f.default for f in fields(ReconstructOptions) if f.default is not MISSING}
+    return {k: v for k, v in options.items() if k not in defaults or defaults[k] != v}
+
+
+def reference_options_used(scene_dir: Path) -> dict:
+    """The non-default options the scene's clean reference was made with (``{}`` when the file is absent)."""
+    path = Path(scene_dir) / REFERENCE_DIR / REFERENCE_OPTIONS_FILE
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
 def simulate_scene(photos: str | Path, out: str | Path, frames: int = 5, motion_px: float = 2.0,
                    noise: str | None = "gaussian:50", seed: int = 0, reference: bool = True,
-                   progress: bool = True) -> Reference | None:
+                   progress: bool = True, reference_options: dict | None = None) -> Reference | None:
     """Write the burst scene of ``photos`` into ``out`` (module docstring); returns the reference (or ``None``).
 
-    Bursts already written with ``frames`` frames are kept (a re-run resumes).
+    Bursts already written with ``frames`` frames are kept (a re-run resumes), and so is a
+    clean-SIFT reference made with the same ``reference_options``.
     """
     from lburst.noise import noise_from_spec
     from lburst.simulate import random_motion, simulate_burst, stable_seed
@@ -107,11 +140,15 @@ def simulate_scene(photos: str | Path, out: str | Path, frames: int = 5, motion_
         write_burst(folder, burst)
     if not reference:
         return None
+    reference_options = dict(reference_options or {})
     if (out / "reference.json").is_file():
         existing = Reference.load(out / "reference.json")
-        if existing.source == REFERENCE_SOURCE:
+        if existing.source == REFERENCE_SOURCE and reference_options_used(out) == non_default_options(reference_options):
             return existing
-    return make_reference(photos, out, progress)
+    made = make_reference(photos, out, progress, **reference_options)  # replaces reference.json atomically
+    if made is None:
+        (out / "reference.json").unlink(missing_ok=True)  # one made with other options is not this reference
+    return made
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -122,6 +159,15 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise", default="gaussian:50", help="noise spec (lburst.noise), or 'none'")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-reference", action="store_true", help="skip the clean SIFT reconstruction")
+    parser.add_argument("--reference-single-camera", action="store_true",
+                        help="one shared COLMAP camera for all clean photos in the reference reconstruction "
+                             "(when their priors agree), for a set shot with one camera; default: one camera "
+                             "per photo (lund needs this and --reference-fix-intrinsics)")
+    parser.add_argument("--reference-fix-intrinsics", action="store_true",
+                        help="keep the reference cameras at their prior (EXIF focal length, no distortion) "
+                             "instead of refining them; with --reference-single-camera for forward motion (lund)")
+    parser.add_argument("--reference-threads", type=int, default=2,
+                        help="COLMAP threads for the reference reconstruction (its result depends on them)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -129,7 +175,10 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         ref = simulate_scene(args.photos, args.out, args.frames, args.motion_px, args.noise, args.seed,
-                             reference=not args.no_reference)
+                             reference=not args.no_reference,
+                             reference_options={"single_camera": args.reference_single_camera,
+                                                "fix_intrinsics": args.reference_fix_intrinsics,
+                                                "num_threads": args.reference_threads})
     except (SceneError, ReconstructionError, ValueError) as err:
         print(f"lburst simulate scene: {err}", file=sys.stderr)
         return 1
@@ -138,6 +187,8 @@ def main(args: argparse.Namespace) -> int:
             print(f"lburst simulate scene: the clean photos did not reconstruct; {args.out} has no reference",
                   file=sys.stderr)
             return 1
-        print(f"reference: {len(ref.poses)} photos registered ({REFERENCE_SOURCE}) in {Path(args.out) / 'reference.json'}")
+        total = len([i for i in list_scene(args.photos).items if i.kind == "image"])
+        print(f"reference: {len(ref.poses)}/{total} photos registered ({REFERENCE_SOURCE}) "
+              f"in {Path(args.out) / 'reference.json'}")
     print(f"scene written to {args.out}")
     return 0
