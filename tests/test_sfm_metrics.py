@@ -53,3 +53,27 @@ def test_method_slug_is_a_safe_unique_name():
     a, b = method_slug("r2d2:../shared/anchors/R2D2.pt"), method_slug("r2d2:/other/R2D2.pt")
     assert "/" not in a and a != b
     assert method_slug("sift") != method_slug("sift,root=true")
+
+
+def test_benchmark_evaluates_again_when_the_reference_is_remade(tmp_path):
+    import numpy as np
+
+    from lburst.scenes.reference import Reference
+
+    scene = tmp_path / "scene"
+    scene.mkdir()
+    names = ["a", "b", "c", "d"]
+    poses = {n: (np.eye(3), np.array([-float(i), 0.0, 0.0])) for i, n in enumerate(names)}  # centres on a line
+    camera = {"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 50.0, 32.0, 24.0]}
+    Reference("sift-clean", camera, poses, 3.0).save(scene / "reference.json")
+    out = tmp_path / "bench" / method_slug("sift") / scene.name
+    ReconstructionResult(str(scene), "sift", str(out), names, names, poses=poses,
+                         metrics={"converged": 1.0, "registered_pct": 100.0}).save()
+    first = run_benchmark([scene], ["sift"], tmp_path / "bench", progress=False)["rows"][0]
+    assert first["ate_rmse"] < 1e-9 and first["reference_sha1"]
+    # the reference is remade (another path): the finished run is evaluated again, not left with the old numbers
+    bent = {**poses, "d": (np.eye(3), np.array([-3.0, -1.0, 0.0]))}
+    Reference("sift-clean", camera, bent, 3.4).save(scene / "reference.json")
+    second = run_benchmark([scene], ["sift"], tmp_path / "bench", progress=False)["rows"][0]
+    assert second["ate_rmse"] > 0.1 and second["reference_sha1"] != first["reference_sha1"]
+    assert ReconstructionResult.load(out / "result.json").metrics["ate_rmse"] == second["ate_rmse"]

@@ -3,7 +3,9 @@
 For each (method, scene) :func:`lburst.sfm.reconstruct_scene` runs in
 ``OUT/<method>/<scene>/`` unless that folder already holds a finished ``result.json``
 of the same method (so an interrupted benchmark resumes; ``--force`` reruns); a finished
-run is evaluated against the scene's ``reference.json`` if that appeared since.  The table
+run is evaluated again against the scene's ``reference.json`` if that appeared or changed
+since (its SHA-1 is kept in the metrics as ``reference_sha1``), so a remade reference needs
+no rerun of the methods.  The table
 (:mod:`lburst.sfm.metrics`: one row per method and scene, and each method's mean over
 scenes) is printed as markdown and written to ``OUT/table.md`` and ``OUT/results.json``.
 """
@@ -28,6 +30,23 @@ def method_slug(spec: str) -> str:
     return f"{readable}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}"
 
 
+REFERENCE_KEYS = ("reference_source", "reference_sha1", "precision", "precision_matches", "num_poses")
+
+
+def reference_sha1(path: Path) -> str | None:
+    return hashlib.sha1(path.read_bytes()).hexdigest() if path.is_file() else None
+
+
+def evaluate(result, reference: Path) -> None:
+    """Replace ``result``'s reference metrics by those against ``reference`` (a ``reference.json``) and save it."""
+    from lburst.sfm.metrics import evaluate_against_reference
+
+    result.metrics = {k: v for k, v in result.metrics.items()
+                      if k not in REFERENCE_KEYS and not k.startswith(("ate_", "rpe_"))}
+    result.metrics.update(evaluate_against_reference(result, reference), reference_sha1=reference_sha1(reference))
+    result.save()
+
+
 def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
     """The table row of one method on one scene (from ``result.json`` when already done)."""
     from lburst.sfm.reconstruct import RESULT_FILE, ReconstructionError, ReconstructionResult, reconstruct_scene
@@ -38,11 +57,9 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
         previous = ReconstructionResult.load(done)
         if previous.method == spec:
             reference = scene / REFERENCE_FILE
-            if reference.is_file() and "reference_source" not in previous.metrics and not previous.error:
-                from lburst.sfm.metrics import evaluate_against_reference
-
-                previous.metrics.update(evaluate_against_reference(previous, reference))  # reference added since
-                previous.save()
+            if (reference.is_file() and not previous.error
+                    and previous.metrics.get("reference_sha1") != reference_sha1(reference)):
+                evaluate(previous, reference)  # reference added or remade since
             return {**row, **previous.metrics, "registered": len(previous.registered), "error": previous.error}
     try:
         result = reconstruct_scene(scene, spec, out, **options)
@@ -51,6 +68,9 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
         return {**row, "converged": 0.0, "error": str(err)}
     if result.error:
         print(f"{spec} on {scene}: {result.error}", file=sys.stderr)
+    elif (scene / REFERENCE_FILE).is_file():
+        result.metrics["reference_sha1"] = reference_sha1(scene / REFERENCE_FILE)
+        result.save()
     return {**row, **result.metrics, "registered": len(result.registered), "error": result.error}
 
 
