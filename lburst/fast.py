@@ -84,10 +84,9 @@ class FastLBurstNet(nn.Module):
         self.config = net.config
         self.body = fold_batchnorm(net.ops).eval().to(memory_format=torch.channels_last)
         pool = next(i for i, op in enumerate(self.body) if isinstance(op, nn.MaxPool2d))
-        self.front = [op for op in self.body[:pool] if isinstance(op, nn.Conv2d)]  # each followed by a ReLU
-        if any(c.kernel_size != (3, 3) or c.dilation != (1, 1) or c.padding != (1, 1) for c in self.front):
+        self.pool_index = pool  # body[:pool + 1] is striped, body[pool + 1:] runs on the whole map
+        if any(c.kernel_size != (3, 3) or c.dilation != (1, 1) or c.padding != (1, 1) for c in self._front_convs()):
             raise ValueError("striped layers must be 3x3 convs with padding 1")
-        self.back = self.body[pool + 1 :]
         heads = torch.cat([net.sal.weight, net.clf.weight])[:, :, 0, 0]  # (3, D): sal, clf0, clf1
         self.register_buffer("head_weight", heads.detach().clone())
         self.register_buffer("head_bias", torch.cat([net.sal.bias, net.clf.bias]).detach().clone())
@@ -100,7 +99,11 @@ class FastLBurstNet(nn.Module):
         x = x.contiguous(memory_format=torch.channels_last)
         if not self._tiled(x):
             return self.body(x)
-        return self.back(self._striped_front(x))
+        return self.body[self.pool_index + 1 :](self._striped_front(x))
+
+    def _front_convs(self) -> list[nn.Conv2d]:
+        """The convs before the max-pool (each followed by a ReLU)."""
+        return [op for op in self.body[: self.pool_index] if isinstance(op, nn.Conv2d)]
 
     def _striped_front(self, x: torch.Tensor) -> torch.Tensor:
         """The full-resolution 3x3 conv + ReLU layers and the 2x2 max-pool, in stripes of rows.
@@ -111,16 +114,17 @@ class FastLBurstNet(nn.Module):
         or bottom, each conv pads that side with zeros as the whole-map conv does.  Every
         output row then sees exactly what it sees in the whole map."""
         height, width = x.shape[-2:]
-        channels = max(c.out_channels for c in self.front)
+        convs = self._front_convs()
+        channels = max(c.out_channels for c in convs)
         rows = self.stripe_rows or max(2, STRIPE_BYTES // (4 * channels * width) // 2 * 2)
-        halo = len(self.front)
+        halo = len(convs)
         stripes, pooled_rows = [], height // 2 * 2  # the pool drops an odd last row (still context)
         for r0 in range(0, pooled_rows, rows):
             r1 = min(pooled_rows, r0 + rows)
             a, z = max(r0 - halo, 0), min(r1 + halo, height)
             top, bottom = int(a == 0), int(z == height)  # image borders: zero padding at every conv
             y = x[:, :, a:z]
-            for conv in self.front:
+            for conv in convs:
                 y = F.conv2d(F.pad(y, (0, 0, top, bottom)) if top or bottom else y, conv.weight, conv.bias,
                              padding=(0, 1)).relu_()
             first = a if top else a + halo  # image row of y's first row
