@@ -153,3 +153,45 @@ def test_bf16_autocast_step_gives_the_fp32_losses_and_gradient_direction(photos)
     assert torch.nn.functional.cosine_similarity(g32, g16, dim=0) > 0.8
     with pytest.raises(ValueError, match="precision"):
         training_step(net, batch, patch=8, precision="int8")
+
+
+def test_tensorboard_log_has_the_losses_of_every_step(photos, tmp_path):
+    pytest.importorskip("tensorboard")
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    cfg = TrainConfig(frames=3, batch_size=2, steps=2, patch=8, workers=0, pair=TINY, tensorboard=True)
+    train([photos], tmp_path, cfg, progress=False)
+    events = EventAccumulator(str(tmp_path / "tensorboard"))
+    events.Reload()
+    loss = [(e.step, e.value) for e in events.Scalars("train/loss")]
+    logged = [(int(r["step"]), float(r["loss"])) for r in _log(tmp_path / "log.csv")]
+    assert [s for s, _ in loss] == [1, 2]
+    np.testing.assert_allclose([v for _, v in loss], [v for _, v in logged], atol=1e-5)
+
+
+def test_two_process_data_parallel_run_logs_the_mean_of_each_ranks_share(photos, tmp_path):
+    """torchrun with 2 CPU processes (Gloo): rank r trains on stream samples r, r + 2, ...;
+    the logged step-1 loss is the mean of the two ranks' losses at the common start."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    helper = Path(__file__).parent / "helpers" / "ddp_train.py"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
+           str(helper), str(photos), str(tmp_path / "run")]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    log = _log(tmp_path / "run" / "log.csv")
+    assert [r["step"] for r in log] == ["1", "2"]
+    assert torch.load(tmp_path / "run" / "last.pt", weights_only=True)["step"] == 2
+    ds = PairDataset(list_photos([photos]), TINY, seed=0)
+    expected = []
+    for rank in (0, 1):
+        items = [ds[rank], ds[rank + 2]]
+        batch = {k: torch.stack([it[k] for it in items]) for k in items[0]}
+        torch.manual_seed(0)
+        net = LBurstNet(NetConfig(frames=3)).to(memory_format=torch.channels_last).train()
+        with torch.no_grad():
+            expected.append(training_step(net, batch, 8, torch.Generator().manual_seed(rank))["loss"].item())
+    assert float(log[0]["loss"]) == pytest.approx(np.mean(expected), abs=1e-4)
+    assert abs(expected[0] - expected[1]) > 1e-3  # the ranks did see different data

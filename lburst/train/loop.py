@@ -4,7 +4,9 @@ A run lives in one folder: ``last.pt`` (resumable: weights, optimizer, step, con
 RNG state; written atomically every few minutes and at the end), ``log.csv`` (one row
 per step), ``config.json`` and, at the end, ``final.pt`` in the published checkpoint
 layout.  ``--resume`` continues from ``last.pt`` with the same data stream, so a run
-stopped and resumed reaches the same steps as one that never stopped.
+stopped and resumed reaches the same steps as one that never stopped.  Under
+``torchrun`` it trains data-parallel on several GPUs (:mod:`lburst.train.distributed`);
+``--tensorboard`` adds a TensorBoard log.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from tqdm import tqdm
 from lburst.io import atomic_path
 from lburst.paths import shared_dir
 from lburst.model import IMAGENET_MEAN, IMAGENET_STD, LBurstNet, NetConfig, save_checkpoint
+from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
 from lburst.train.losses import APSampling, cosim_loss, peaky_loss, reliability_ap_loss
 from lburst.train.pairs import PairConfig
@@ -46,6 +49,8 @@ class TrainConfig:
     ``snapshots/step_XXXXXX.pt`` in the published layout (a few MB each), so the
     benchmark can follow a run's progress.
 
+    ``tensorboard`` also writes the losses for TensorBoard to ``tensorboard/`` in the run.
+
     ``precision`` ``'bf16'`` (or ``'fp16'`` on a GPU) runs the network's forward pass under
     autocast; the losses are computed in fp32 from its outputs."""
 
@@ -63,6 +68,7 @@ class TrainConfig:
     threads: int | None = None
     checkpoint_every_s: float = 300.0
     snapshot_every: int | None = None
+    tensorboard: bool = False
     precision: str = "fp32"
     pair: PairConfig = field(default_factory=PairConfig)
 
@@ -168,26 +174,30 @@ def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds:
 
 def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, resume: bool = False,
           device: str | None = None, progress: bool = True) -> Path:
-    """Train (or resume) a run in folder ``out``; returns the path of ``last.pt``."""
+    """Train (or resume) a run in folder ``out``; returns the path of ``last.pt``.
+
+    Started by ``torchrun`` with several processes, it trains data-parallel
+    (:mod:`lburst.train.distributed`): each rank draws its own share of the stream and
+    rank 0 writes the files."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    ctx = distributed.setup(device)
+    device = ctx.device
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     last = out / "last.pt"
     step, seconds = 0, 0.0
-    generator = torch.Generator().manual_seed(cfg.seed)
+    generator = torch.Generator().manual_seed(cfg.seed + ctx.rank)
     state = None
     if resume and last.is_file():
         state = torch.load(last, map_location="cpu", weights_only=True)
         saved = _config_from_dict(dict(state["config"]))
         cfg = replace(saved, time_budget_s=cfg.time_budget_s, steps=cfg.steps, epochs=cfg.epochs,
                       workers=cfg.workers, threads=cfg.threads, checkpoint_every_s=cfg.checkpoint_every_s,
-                      snapshot_every=cfg.snapshot_every or saved.snapshot_every)
+                      snapshot_every=cfg.snapshot_every or saved.snapshot_every, tensorboard=cfg.tensorboard)
     elif last.is_file():
         raise FileExistsError(f"{last} exists: pass --resume to continue it, or choose another --out")
     photos = list_photos([Path(p) for p in photo_folders])
-    total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / cfg.batch_size)
+    total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / (cfg.batch_size * ctx.world))
     torch.manual_seed(cfg.seed)
     net = LBurstNet(NetConfig(frames=cfg.frames)).to(device).to(memory_format=torch.channels_last)
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -196,15 +206,19 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
         optimizer.load_state_dict(state["optimizer"])
         step, seconds = int(state["step"]), float(state["seconds"])
         torch.set_rng_state(state["torch_rng"])
-        generator.set_state(state["generator"])
-    with atomic_path(out / "config.json") as tmp:
-        tmp.write_text(json.dumps(_config_dict(cfg), indent=2))
+        if ctx.main:  # the saved sampling state is rank 0's; the others start anew from their seed
+            generator.set_state(state["generator"])
+    model = ctx.wrap(net.train())
+    writer = _tensorboard_writer(out) if cfg.tensorboard and ctx.main else None
+    if ctx.main:
+        out.mkdir(parents=True, exist_ok=True)
+        with atomic_path(out / "config.json") as tmp:
+            tmp.write_text(json.dumps(_config_dict(cfg), indent=2))
     log = _read_log(out / "log.csv", step)
-    net.train()
     loader = DataLoader(
         PairDataset(photos, cfg.pair, cfg.seed),
         batch_size=cfg.batch_size,
-        sampler=StreamSampler(step * cfg.batch_size),
+        sampler=StreamSampler(step * cfg.batch_size * ctx.world + ctx.rank, ctx.world),
         num_workers=cfg.workers,
         persistent_workers=cfg.workers > 0,
         prefetch_factor=4 if cfg.workers > 0 else None,
@@ -213,22 +227,29 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     )
     started = time.monotonic()
     last_save = started
-    bar = tqdm(total=total, initial=step, desc=f"train b{cfg.frames}", disable=not progress, dynamic_ncols=True)
+    bar = tqdm(total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main),
+               dynamic_ncols=True)
     data = iter(loader)
     while step < total:
-        if cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s:
+        if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
             break
         batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
-        losses = training_step(net, batch, cfg.patch, generator, cfg.ap_weight, cfg.precision)
+        losses = training_step(model, batch, cfg.patch, generator, cfg.ap_weight, cfg.precision)
         optimizer.zero_grad(set_to_none=True)
         losses["loss"].backward()
         optimizer.step()
         step += 1
+        values = ctx.mean(losses)
+        if not ctx.main:
+            continue
         row = {"step": step, "seconds": round(seconds + time.monotonic() - started, 2)}
-        row.update({k: round(float(v.detach()), 5) for k, v in losses.items()})
+        row.update({k: round(values[k], 5) for k in losses})
         log.append(row)
         bar.update(1)
-        bar.set_postfix({k: f"{float(v.detach()):.3f}" for k, v in losses.items()})
+        bar.set_postfix({k: f"{values[k]:.3f}" for k in losses})
+        if writer is not None:
+            for k in losses:
+                writer.add_scalar(f"train/{k}", values[k], step)
         if cfg.snapshot_every and step % cfg.snapshot_every == 0:
             save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta={"step": step})
         if time.monotonic() - last_save > cfg.checkpoint_every_s:
@@ -236,11 +257,23 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             _write_log(out / "log.csv", log)
             last_save = time.monotonic()
     bar.close()
-    save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
-    _write_log(out / "log.csv", log)
-    if step >= total:
-        save_checkpoint(net, out / "final.pt", meta={"step": step, "config": _config_dict(cfg)})
+    if ctx.main:
+        save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
+        _write_log(out / "log.csv", log)
+        if step >= total:
+            save_checkpoint(net, out / "final.pt", meta={"step": step, "config": _config_dict(cfg)})
+    if writer is not None:
+        writer.close()
+    ctx.close()
     return last
+
+
+def _tensorboard_writer(out: Path):
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError as exc:
+        raise RuntimeError("--tensorboard needs the tensorboard package: pip install 'lburst[tensorboard]'") from exc
+    return SummaryWriter(str(out / "tensorboard"))
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -255,6 +288,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-budget", type=float, help="stop (resumably) after this many seconds")
     p.add_argument("--workers", type=int)
     p.add_argument("--threads", type=int, help="torch threads")
+    p.add_argument("--tensorboard", action="store_true", help="also log the losses for TensorBoard (RUN/tensorboard)")
     p.add_argument("--snapshot-every", type=int, help="keep the weights every this many steps (snapshots/)")
     p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
     p.add_argument("--seed", type=int)
@@ -266,7 +300,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     cfg = replace(TrainConfig(), **PRESETS[args.preset])
     overrides = {"frames": args.frames, "steps": args.steps, "batch_size": args.batch_size,
                  "time_budget_s": args.time_budget, "workers": args.workers, "threads": args.threads,
-                 "seed": args.seed, "precision": args.precision, "snapshot_every": args.snapshot_every}
+                 "seed": args.seed, "precision": args.precision, "snapshot_every": args.snapshot_every,
+                 "tensorboard": args.tensorboard or None}
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
     if args.frames is not None:
