@@ -195,3 +195,27 @@ def test_two_process_data_parallel_run_logs_the_mean_of_each_ranks_share(photos,
             expected.append(training_step(net, batch, 8, torch.Generator().manual_seed(rank))["loss"].item())
     assert float(log[0]["loss"]) == pytest.approx(np.mean(expected), abs=1e-4)
     assert abs(expected[0] - expected[1]) > 1e-3  # the ranks did see different data
+
+
+def test_an_interrupted_run_keeps_its_finished_steps(photos, tmp_path, monkeypatch):
+    """Ctrl-C during step 3: last.pt and log.csv hold steps 1-2, and --resume finishes the run."""
+    import lburst.train.loop as loop
+
+    calls = {"n": 0}
+    real_step = loop.training_step
+
+    def interrupted_at_third(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real_step(*args, **kwargs)
+
+    cfg = TrainConfig(frames=3, batch_size=2, steps=4, patch=8, workers=0, pair=TINY)
+    monkeypatch.setattr(loop, "training_step", interrupted_at_third)
+    with pytest.raises(KeyboardInterrupt):
+        train([photos], tmp_path, cfg, progress=False)
+    assert torch.load(tmp_path / "last.pt", weights_only=True)["step"] == 2
+    assert [r["step"] for r in _log(tmp_path / "log.csv")] == ["1", "2"]
+    monkeypatch.setattr(loop, "training_step", real_step)
+    train([photos], tmp_path, cfg, resume=True, progress=False)
+    assert [r["step"] for r in _log(tmp_path / "log.csv")] == ["1", "2", "3", "4"]

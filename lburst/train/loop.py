@@ -230,32 +230,38 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     bar = tqdm(total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main),
                dynamic_ncols=True)
     data = iter(loader)
-    while step < total:
-        if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
-            break
-        batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
-        losses = training_step(model, batch, cfg.patch, generator, cfg.ap_weight, cfg.precision)
-        optimizer.zero_grad(set_to_none=True)
-        losses["loss"].backward()
-        optimizer.step()
-        step += 1
-        values = ctx.mean(losses)
-        if not ctx.main:
-            continue
-        row = {"step": step, "seconds": round(seconds + time.monotonic() - started, 2)}
-        row.update({k: round(values[k], 5) for k in losses})
-        log.append(row)
-        bar.update(1)
-        bar.set_postfix({k: f"{values[k]:.3f}" for k in losses})
-        if writer is not None:
-            for k in losses:
-                writer.add_scalar(f"train/{k}", values[k], step)
-        if cfg.snapshot_every and step % cfg.snapshot_every == 0:
-            save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta={"step": step})
-        if time.monotonic() - last_save > cfg.checkpoint_every_s:
+    try:
+        while step < total:
+            if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
+                break
+            batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
+            losses = training_step(model, batch, cfg.patch, generator, cfg.ap_weight, cfg.precision)
+            optimizer.zero_grad(set_to_none=True)
+            losses["loss"].backward()
+            optimizer.step()
+            values = ctx.mean(losses)
+            row = {"step": step + 1, "seconds": round(seconds + time.monotonic() - started, 2)}
+            row.update({k: round(values[k], 5) for k in losses})
+            step += 1
+            log.append(row)
+            if not ctx.main:
+                continue
+            bar.update(1)
+            bar.set_postfix({k: f"{values[k]:.3f}" for k in losses})
+            if writer is not None:
+                for k in losses:
+                    writer.add_scalar(f"train/{k}", values[k], step)
+            if cfg.snapshot_every and step % cfg.snapshot_every == 0:
+                save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta={"step": step})
+            if time.monotonic() - last_save > cfg.checkpoint_every_s:
+                save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
+                _write_log(out / "log.csv", log)
+                last_save = time.monotonic()
+    except KeyboardInterrupt:  # keep every finished step; a --resume continues from here
+        if ctx.main:
             save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
             _write_log(out / "log.csv", log)
-            last_save = time.monotonic()
+        raise
     bar.close()
     if ctx.main:
         save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
