@@ -66,7 +66,9 @@ def main() -> int:
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--crop", type=int, default=192)
     p.add_argument("--steps", type=int, default=3)
-    p.add_argument("--precision", nargs="+", default=["fp32"], choices=["fp32", "bf16", "fp16"],
+    from lburst.model import AUTOCAST_DTYPES
+
+    p.add_argument("--precision", nargs="+", default=["fp32"], choices=list(AUTOCAST_DTYPES),
                    help="autocast of the forward pass (each is measured)")
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--out", type=Path)

@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lburst.model import LBurstNet
+from lburst.model import LBurstNet, autocast_dtype
 
 
 def fold_batchnorm(ops: nn.ModuleList) -> nn.Sequential:
@@ -72,8 +72,7 @@ class FastLBurstNet(nn.Module):
         layer on the whole map (one graph for any size, as the ONNX export needs; the GPU
         path always does)."""
         super().__init__()
-        if precision not in ("fp32", "bf16", "fp16"):
-            raise ValueError(f"precision must be fp32, bf16 or fp16, got {precision!r}")
+        self._autocast = autocast_dtype(precision)
         for name, rows in (("stripe_rows", stripe_rows), ("head_band_rows", head_band_rows)):
             if rows is not None and (rows < 1 or (name == "stripe_rows" and rows % 2)):
                 raise ValueError(f"{name} must be a positive (for stripes: even) number of rows, got {rows}")
@@ -162,11 +161,10 @@ class FastLBurstNet(nn.Module):
 
         With ``precision`` ``'bf16'`` or ``'fp16'`` the backbone runs under autocast and
         the heads in fp32 (so the 3x3 maxima do not tie on rounded values)."""
-        if self.precision == "fp32":
+        if self._autocast is None:
             half = self.raw(x)
         else:
-            dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}[self.precision]
-            with torch.autocast(device_type=x.device.type, dtype=dtype):
+            with torch.autocast(device_type=x.device.type, dtype=self._autocast):
                 half = self.raw(x)
             half = half.float()
         pre = self._heads(half)

@@ -36,6 +36,17 @@ from torch import nn
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 
+#: autocast dtype of each precision the network can run in (``None``: plain fp32)
+AUTOCAST_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
+
+
+def autocast_dtype(precision: str) -> torch.dtype | None:
+    """The autocast dtype of ``precision`` (``None`` for fp32); ``ValueError`` for another name."""
+    if precision not in AUTOCAST_DTYPES:
+        raise ValueError(f"precision must be fp32, bf16 or fp16, got {precision!r}")
+    return AUTOCAST_DTYPES[precision]
+
+
 #: Class name written into checkpoints, as in the published files.
 NET_NAME = "Fast_Quad_L2Net_ConfCFS"
 

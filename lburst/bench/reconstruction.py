@@ -33,22 +33,19 @@ def method_slug(spec: str) -> str:
 REFERENCE_KEYS = ("reference_source", "reference_sha1", "precision", "precision_matches", "num_poses")
 
 
-def reference_sha1(path: Path) -> str | None:
-    return hashlib.sha1(path.read_bytes()).hexdigest() if path.is_file() else None
-
-
 def evaluate(result, reference: Path) -> None:
     """Replace ``result``'s reference metrics by those against ``reference`` (a ``reference.json``) and save it."""
     from lburst.sfm.metrics import evaluate_against_reference
 
     result.metrics = {k: v for k, v in result.metrics.items()
                       if k not in REFERENCE_KEYS and not k.startswith(("ate_", "rpe_"))}
-    result.metrics.update(evaluate_against_reference(result, reference), reference_sha1=reference_sha1(reference))
+    result.metrics.update(evaluate_against_reference(result, reference))
     result.save()
 
 
 def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
     """The table row of one method on one scene (from ``result.json`` when already done)."""
+    from lburst.sfm.metrics import reference_sha1
     from lburst.sfm.reconstruct import RESULT_FILE, ReconstructionError, ReconstructionResult, reconstruct_scene
 
     row: dict[str, Any] = {"method": spec, "scene": scene.name, "out": str(out)}
@@ -68,9 +65,6 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
         return {**row, "converged": 0.0, "error": str(err)}
     if result.error:
         print(f"{spec} on {scene}: {result.error}", file=sys.stderr)
-    elif (scene / REFERENCE_FILE).is_file():
-        result.metrics["reference_sha1"] = reference_sha1(scene / REFERENCE_FILE)
-        result.save()
     return {**row, **result.metrics, "registered": len(result.registered), "error": result.error}
 
 

@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from lburst.io import BurstError, load_burst, write_features_h5, write_features_npz
 from lburst.methods import create
-from lburst.model import CheckpointError
+from lburst.model import AUTOCAST_DTYPES, CheckpointError
 
 
 def burst_name(path: Path) -> str:
@@ -49,7 +49,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--h5", action="store_true", help="also write an hloc-style features.h5 in --out")
     p.add_argument("--overwrite", action="store_true", help="recompute bursts that are already done")
     p.add_argument("--device", help="cpu or cuda (default: cuda if available)")
-    p.add_argument("--precision", choices=["fp32", "bf16", "fp16"], default="fp32",
+    p.add_argument("--precision", choices=list(AUTOCAST_DTYPES), default="fp32",
                    help="backbone precision of learned methods: bf16 is faster on CPUs with AVX512-BF16 or AMX "
                         "(heads stay fp32; about 99%% of keypoints within 1 px of fp32), fp16 on a GPU")
 

@@ -6,6 +6,7 @@ import numpy as np
 
 from lburst.extract import LBurst
 from lburst.features import Features
+from lburst.model import autocast_dtype
 from lburst.methods import register
 from lburst.methods.options import as_bool
 
@@ -24,8 +25,7 @@ class LearnedExtractor:
 
 
 def _precision(value: str) -> str:
-    if value not in ("fp32", "bf16", "fp16"):
-        raise ValueError(f"precision must be fp32, bf16 or fp16, got {value!r}")
+    autocast_dtype(value)  # a clear error for an unknown precision
     return value
 
 

@@ -30,6 +30,7 @@ converge contributes 0 registered images and 0 points, and no trajectory error
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -140,6 +141,11 @@ def reference_length(reference: Reference, order: list[str]) -> float:
     return path_length(np.array([centres[n] for n in order if n in centres]))
 
 
+def reference_sha1(path: str | Path) -> str:
+    """SHA-1 of a ``reference.json`` file's bytes."""
+    return hashlib.sha1(Path(path).read_bytes()).hexdigest()
+
+
 def evaluate_against_reference(result: "ReconstructionResult", reference: Reference | str | Path,
                                cameras: dict[str, dict] | None = None,
                                threshold: float = PRECISION_THRESHOLD_PX) -> dict[str, Any]:
@@ -149,15 +155,18 @@ def evaluate_against_reference(result: "ReconstructionResult", reference: Refere
     per-image ``cameras`` are then used).  ``cameras`` maps image names to reference
     camera dicts (default: those of the file, else ``reference.camera`` for every image).
     Returns ``precision``, ``precision_matches``, ``ate_*``, ``rpe_*``, ``num_poses``
-    (keys absent when they cannot be computed, e.g. fewer than 3 common registered images).
+    (keys absent when they cannot be computed, e.g. fewer than 3 common registered images),
+    and for a file its ``reference_sha1`` (so a result can tell when it was remade).
     """
+    out: dict[str, Any] = {}
     if not isinstance(reference, Reference):
         from lburst.sfm.scene import reference_cameras
 
+        out["reference_sha1"] = reference_sha1(reference)
         cameras = cameras or reference_cameras(reference)
         reference = Reference.load(reference)
     cameras = cameras or {name: reference.camera for name in reference.poses}
-    out: dict[str, Any] = {"reference_source": reference.source}
+    out["reference_source"] = reference.source
     data = result.match_data()
     if data is not None:
         keypoints, pairs, inliers = data

@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from lburst.io import atomic_path
 from lburst.paths import shared_dir
-from lburst.model import IMAGENET_MEAN, IMAGENET_STD, LBurstNet, NetConfig, save_checkpoint
+from lburst.model import AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, LBurstNet, NetConfig, autocast_dtype, save_checkpoint
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
 from lburst.train.losses import APSampling, cosim_loss, peaky_loss, reliability_ap_loss
@@ -99,20 +99,15 @@ def _normalise(burst: torch.Tensor) -> torch.Tensor:
     return x.flatten(1, 2)
 
 
-AUTOCAST_DTYPES = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
-
-
 def training_step(
     net: torch.nn.Module, batch: dict[str, torch.Tensor], patch: int, generator: torch.Generator | None = None,
     ap_weight: float = 0.0, precision: str = "fp32",
 ) -> dict[str, torch.Tensor]:
     """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``)."""
-    if precision not in AUTOCAST_DTYPES:
-        raise ValueError(f"precision must be one of {sorted(AUTOCAST_DTYPES)}, got {precision!r}")
+    dtype = autocast_dtype(precision)
     n = batch["burst_a"].shape[0]
     x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
     x = x.contiguous(memory_format=torch.channels_last)
-    dtype = AUTOCAST_DTYPES[precision]
     with torch.autocast(device_type=x.device.type, dtype=dtype, enabled=dtype is not None):
         out = net(x)
     desc, rep, rel = (out[k].float() for k in ("descriptors", "repeatability", "reliability"))
@@ -228,6 +223,10 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     )
     started = time.monotonic()
     last_save = started
+
+    def checkpoint() -> None:  # rank 0: the resumable state and the log, atomically
+        save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
+        _write_log(out / "log.csv", log)
     bar = tqdm(total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main),
                dynamic_ncols=True)
     data = iter(loader)
@@ -241,12 +240,11 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             losses["loss"].backward()
             optimizer.step()
             values = ctx.mean(losses)
-            row = {"step": step + 1, "seconds": round(seconds + time.monotonic() - started, 2)}
-            row.update({k: round(values[k], 5) for k in losses})
             step += 1
-            log.append(row)
             if not ctx.main:
                 continue
+            log.append({"step": step, "seconds": round(seconds + time.monotonic() - started, 2),
+                        **{k: round(values[k], 5) for k in losses}})
             bar.update(1)
             bar.set_postfix({k: f"{values[k]:.3f}" for k in losses})
             if writer is not None:
@@ -255,18 +253,15 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             if cfg.snapshot_every and step % cfg.snapshot_every == 0:
                 save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta={"step": step})
             if time.monotonic() - last_save > cfg.checkpoint_every_s:
-                save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
-                _write_log(out / "log.csv", log)
+                checkpoint()
                 last_save = time.monotonic()
     except KeyboardInterrupt:  # keep every finished step; a --resume continues from here
         if ctx.main:
-            save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
-            _write_log(out / "log.csv", log)
+            checkpoint()
         raise
     bar.close()
     if ctx.main:
-        save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
-        _write_log(out / "log.csv", log)
+        checkpoint()
         if step >= total:
             save_checkpoint(net, out / "final.pt", meta={"step": step, "config": _config_dict(cfg)})
     if writer is not None:
