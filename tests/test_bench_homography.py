@@ -77,3 +77,24 @@ def test_recomputed_results_are_identical(tmp_path):
     first = run_homography_benchmark(tmp_path / "data", ["sift"], [25], tmp_path / "a", progress=False)
     second = run_homography_benchmark(tmp_path / "data", ["sift"], [25], tmp_path / "b", progress=False)
     assert first["methods"]["sift"]["sigma25"]["pairs"] == second["methods"]["sift"]["sigma25"]["pairs"]
+
+
+def test_weights_retrained_at_the_same_path_are_not_served_cached_results(tmp_path):
+    import shutil
+
+    import torch
+
+    from lburst.weights import weights_path
+
+    _write_sequence(tmp_path / "data" / "seq", size=(96, 128))
+    ckpt = tmp_path / "model.pt"
+    run = lambda: run_homography_benchmark(tmp_path / "data", [f"r2d2:{ckpt}"], [0], tmp_path / "out",  # noqa: E731
+                                           progress=False)["methods"][f"r2d2:{ckpt}"]["sigma0"]["pairs"]
+    shutil.copy(weights_path("lburst-b1"), ckpt)
+    first = run()
+    assert run() == first  # same weights: read from the cache
+    state = torch.load(ckpt, weights_only=True)
+    state["state_dict"] = {k: v * 0.5 if v.is_floating_point() else v for k, v in state["state_dict"].items()}
+    torch.save(state, ckpt)  # "retrained" in place
+    assert run() != first
+    assert len(list((tmp_path / "out" / "cache").iterdir())) == 2

@@ -1,5 +1,8 @@
 """Reading bursts (every error names the file) and writing features."""
 
+import os
+import stat
+
 import cv2
 import h5py
 import numpy as np
@@ -99,3 +102,19 @@ def test_features_npz_and_h5(tmp_path):
         np.testing.assert_array_equal(f["img/keypoints"][()], feats["keypoints"])
         assert f["img/descriptors"].shape == (128, 7)
         assert tuple(f["img/image_size"][()]) == (32, 24)
+
+
+def test_atomic_writes_get_the_usual_permissions_and_leave_nothing_on_failure(tmp_path):
+    from lburst.io import atomic_path
+
+    old = os.umask(0o022)
+    try:
+        with atomic_path(tmp_path / "a.bin") as tmp:
+            tmp.write_bytes(b"x")  # written in place, as torch.save and h5py do
+        assert stat.S_IMODE((tmp_path / "a.bin").stat().st_mode) == 0o644  # not mkstemp's 0o600
+        with pytest.raises(RuntimeError), atomic_path(tmp_path / "a.bin") as tmp:
+            tmp.write_bytes(b"partial")
+            raise RuntimeError("crash")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.bin").read_bytes() == b"x" and sorted(p.name for p in tmp_path.iterdir()) == ["a.bin"]

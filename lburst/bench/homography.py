@@ -17,7 +17,9 @@ Protocol (reproducible by anyone):
    (1, K), K = 2..6; averaged over the 5 pairs of a sequence, then over sequences.
    A second table keeps only pairs rotated by 25 degrees or less (pooled).
 
-Features are cached per (method, noise level, sequence, image) under ``OUT/cache``.
+Features are cached per (method, noise level, sequence, image) under ``OUT/cache``; a
+learned method's cache is keyed on its weights' SHA-1 too, so retrained weights at the
+same path are run again.
 """
 
 from __future__ import annotations
@@ -70,16 +72,19 @@ class MethodRunner:
 
     def __init__(self, spec: str, top_k: int) -> None:
         from lburst.methods import create
+        from lburst.methods.learned import results_key
 
         self.spec = spec
         kind = spec.split(":")[0].split(",")[0].removeprefix("oracle-merge+").removeprefix("merge+")
         options = {"top_k": str(top_k)} if kind in LEARNED else {}
         if spec.startswith("gold:"):
-            self.mode, self.extractor = "gold", create("r2d2:" + spec[len("gold:"):], **options)
+            self.mode, prefix, inner = "gold", "gold:", "r2d2:" + spec[len("gold:"):]
         elif spec.startswith("oracle-merge+"):
-            self.mode, self.extractor = "oracle", create(spec[len("oracle-merge+"):], **options)
+            self.mode, prefix, inner = "oracle", "oracle-merge+", spec[len("oracle-merge+"):]
         else:
-            self.mode, self.extractor = "burst", create(spec, **options)
+            self.mode, prefix, inner = "burst", "", spec
+        self.extractor = create(inner, **options)
+        self.key = prefix + results_key(inner)  # names the feature cache
 
     def __call__(self, image: np.ndarray, burst: np.ndarray, motion: tuple[float, float]) -> Features:
         if self.mode == "gold":
@@ -171,7 +176,7 @@ def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[
                 feats, times = [], []
                 for i, image in enumerate(seq.images):
                     burst, motion = protocol_burst(image, name, i, level)
-                    cache = out / "cache" / _slug(spec) / level.label / name / f"{i + 1}.npz"
+                    cache = out / "cache" / _slug(runner.key) / level.label / name / f"{i + 1}.npz"
                     f, t = _cached(cache, lambda: runner(image, burst, motion))
                     feats.append(f)
                     times.append(t)

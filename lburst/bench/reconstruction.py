@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from lburst.io import atomic_path
+from lburst.methods.learned import results_key
 from lburst.sfm.scene import REFERENCE_FILE
 
 
@@ -77,7 +78,7 @@ def run_benchmark(scenes: list[str | Path], methods: list[str], out_dir: str | P
     rows = []
     for spec in methods:
         for scene in map(Path, scenes):
-            rows.append(run_one(scene, spec, out_dir / method_slug(spec) / scene.name, force, options))
+            rows.append(run_one(scene, spec, out_dir / method_slug(results_key(spec)) / scene.name, force, options))
     means = [{"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
              for spec in methods]
     report = {"scenes": [str(s) for s in scenes], "methods": methods, "options": options, "rows": rows, "means": means}

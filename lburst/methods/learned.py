@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from lburst.extract import LBurst
@@ -9,6 +11,35 @@ from lburst.features import Features
 from lburst.model import autocast_dtype
 from lburst.methods import register
 from lburst.methods.options import as_bool
+
+DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "r2d2": "lburst-b1"}
+
+
+def weights_file(spec: str) -> Path | None:
+    """The checkpoint file that a method spec loads (``None`` when it loads none).
+
+    ``lburst[:CKPT]`` and ``r2d2[:CKPT]``, also behind ``merge+``; without ``CKPT`` the
+    shipped weights.  Caches of results key on this file's content, so that a
+    checkpoint retrained in place (or new shipped weights) is not served stale results.
+    """
+    from lburst.methods import parse_spec
+    from lburst.weights import weights_path
+
+    while spec.startswith("merge+"):
+        spec = spec[len("merge+"):]
+    name, arg, _ = parse_spec(spec)
+    if name not in DEFAULT_WEIGHTS:
+        return None
+    return Path(arg) if arg else weights_path(DEFAULT_WEIGHTS[name])
+
+
+def results_key(spec: str) -> str:
+    """``spec``, plus ``@`` and 12 hex digits of the SHA-1 of the weights it loads, if any
+    (the name under which benchmarks cache its results)."""
+    from lburst.io import file_sha1
+
+    path = weights_file(spec)
+    return f"{spec}@{file_sha1(path)[:12]}" if path is not None and path.is_file() else spec
 
 
 class LearnedExtractor:
@@ -47,10 +78,10 @@ def _make(arg: str | None, default: str, device=None, frame_order: str = "tempor
 @register("lburst")
 def lburst(arg: str | None = None, **options) -> LearnedExtractor:
     """A burst network: the shipped ``lburst-b5`` or the checkpoint at ``arg``."""
-    return _make(arg, "lburst-b5", **options)
+    return _make(arg, DEFAULT_WEIGHTS["lburst"], **options)
 
 
 @register("r2d2")
 def r2d2(arg: str | None = None, **options) -> LearnedExtractor:
     """A single-image network on the common frame: the shipped ``lburst-b1`` or the checkpoint ``arg``."""
-    return _make(arg, "lburst-b1", **options)
+    return _make(arg, DEFAULT_WEIGHTS["r2d2"], **options)
