@@ -116,8 +116,11 @@ class LBurstNet(nn.Module):
         self.clf = nn.Conv2d(config.dim, 2, kernel_size=1)
         self.sal = nn.Conv2d(config.dim, 1, kernel_size=1)
 
-    def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Run the net on normalised bursts ``x`` of shape ``(B, 3N, H, W)``."""
+    def forward(self, x: torch.Tensor, reliability_logits: bool = False) -> dict[str, torch.Tensor]:
+        """Run the net on normalised bursts ``x`` of shape ``(B, 3N, H, W)``.
+
+        ``reliability_logits`` also returns the reliability's logit (class 1 minus class 0,
+        ``(B, 1, H, W)``), for training (see ``TrainConfig.rel_logit_weight``)."""
         if x.ndim != 4 or x.shape[1] != self.config.in_channels:
             raise ValueError(
                 f"expected input (B, {self.config.in_channels}, H, W) for a {self.config.frames}-frame "
@@ -128,16 +131,19 @@ class LBurstNet(nn.Module):
             x = op(x)
         x = F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
         squared = x * x
-        reliability = torch.softmax(self.clf(squared), dim=1)[:, 1:2]
+        logits = self.clf(squared)
+        reliability = torch.softmax(logits, dim=1)[:, 1:2]
         s = F.softplus(self.sal(squared))
         repeatability = s / (1 + s)
         descriptors = F.normalize(x, p=2, dim=1)
+        out = {"descriptors": descriptors, "repeatability": repeatability, "reliability": reliability}
+        if reliability_logits:
+            out["reliability_logits"] = logits[:, 1:2] - logits[:, 0:1]
         pad_w, pad_h = width - x.shape[-1], height - x.shape[-2]
         if pad_w or pad_h:  # odd input size: see the module docstring
-            descriptors = F.pad(descriptors, (0, pad_w, 0, pad_h), mode="replicate")
-            reliability = F.pad(reliability, (0, pad_w, 0, pad_h))
-            repeatability = F.pad(repeatability, (0, pad_w, 0, pad_h))
-        return {"descriptors": descriptors, "repeatability": repeatability, "reliability": reliability}
+            out = {k: F.pad(v, (0, pad_w, 0, pad_h), mode="replicate" if k == "descriptors" else "constant")
+                   for k, v in out.items()}
+        return out
 
 
 def normalize_burst(burst: np.ndarray, device: torch.device | str = "cpu") -> torch.Tensor:

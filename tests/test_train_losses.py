@@ -114,3 +114,35 @@ def test_collapsed_reliability_stops_descriptor_learning_unless_ap_is_weighted_i
     assert grad.abs().max() == 0
     (grad,) = torch.autograd.grad(loss + 0.25 * (1 - ap), desc_a)
     assert grad.abs().max() > 0
+
+
+def test_logit_margin_loss_is_zero_inside_the_margin_and_pulls_saturated_logits_back():
+    from lburst.train.losses import logit_margin_loss
+
+    inside = torch.linspace(-4, 4, 50)
+    assert logit_margin_loss(inside, 4.0) == 0
+    z = torch.tensor([-19.0, -2.0, 9.0], requires_grad=True)
+    loss = logit_margin_loss(z, 4.0)
+    assert torch.isclose(loss, torch.tensor((15.0**2 + 5.0**2) / 3))
+    loss.backward()
+    assert z.grad[0] < 0 < z.grad[2] and z.grad[1] == 0  # descent moves -19 up and 9 down
+
+
+def test_saturated_reliability_recovers_only_with_the_logit_margin_loss():
+    """Why TrainConfig.rel_logit_weight exists: a saturated softmax passes no gradient."""
+    from lburst.model import LBurstNet, NetConfig
+    from lburst.train.losses import logit_margin_loss
+
+    torch.manual_seed(0)
+    net = LBurstNet(NetConfig(frames=1))
+    x = torch.randn(1, 3, 32, 32)
+    with torch.no_grad():
+        net.clf.bias.copy_(torch.tensor([25.0, -25.0]))  # reliability ~ 1e-22: collapsed
+    out = net(x, reliability_logits=True)
+    z = out["reliability_logits"]
+    assert torch.allclose(z, torch.log(out["reliability"]) - torch.log1p(-out["reliability"]), atol=1e-3, rtol=1e-4)
+    rel_only = (0.5 - out["reliability"] * 0.3).mean()  # the reliability loss with AP 0.8 > base
+    (g,) = torch.autograd.grad(rel_only, net.clf.bias, retain_graph=True)
+    assert g.abs().max() < 1e-12
+    (g,) = torch.autograd.grad(rel_only + 0.01 * logit_margin_loss(z), net.clf.bias)
+    assert g[1] < -0.1  # descent raises the class-1 logit

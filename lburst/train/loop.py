@@ -28,7 +28,7 @@ from lburst.paths import shared_dir
 from lburst.model import AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, LBurstNet, NetConfig, autocast_dtype, save_checkpoint
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
-from lburst.train.losses import APSampling, cosim_loss, peaky_loss, reliability_ap_loss
+from lburst.train.losses import APSampling, cosim_loss, logit_margin_loss, peaky_loss, reliability_ap_loss
 from lburst.train.pairs import PairConfig
 
 LOG_FIELDS = ("step", "seconds", "loss", "cosim", "peaky", "reliability", "ap")
@@ -44,6 +44,11 @@ class TrainConfig:
     as it does under heavy noise, reliability collapses to 0 and descriptors stop
     learning (seen here: a single-image run stuck at AP 0.08 for 13k steps, a burst run
     stuck until step 7.6k).  The unweighted term keeps them learning; 0 is the paper.
+
+    ``rel_logit_weight`` adds ``rel_logit_weight * logit_margin_loss(z, rel_logit_margin)``
+    on the reliability logits ``z`` of both bursts (:func:`lburst.train.losses.logit_margin_loss`):
+    it keeps a collapsed reliability from saturating, so it can recover once AP passes the
+    base.  0 (the paper) leaves the logits free.
 
     ``snapshot_every`` (steps) also keeps the weights at every multiple of it as
     ``snapshots/step_XXXXXX.pt`` in the published layout (a few MB each), so the
@@ -64,6 +69,8 @@ class TrainConfig:
     weight_decay: float = 5e-4
     patch: int = 16
     ap_weight: float = 0.0
+    rel_logit_weight: float = 0.0
+    rel_logit_margin: float = 4.0
     seed: int = 0
     workers: int = 1
     threads: int | None = None
@@ -101,7 +108,7 @@ def _normalise(burst: torch.Tensor) -> torch.Tensor:
 
 def training_step(
     net: torch.nn.Module, batch: dict[str, torch.Tensor], patch: int, generator: torch.Generator | None = None,
-    ap_weight: float = 0.0, precision: str = "fp32",
+    ap_weight: float = 0.0, precision: str = "fp32", rel_logit_weight: float = 0.0, rel_logit_margin: float = 4.0,
 ) -> dict[str, torch.Tensor]:
     """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``)."""
     dtype = autocast_dtype(precision)
@@ -109,13 +116,15 @@ def training_step(
     x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
     x = x.contiguous(memory_format=torch.channels_last)
     with torch.autocast(device_type=x.device.type, dtype=dtype, enabled=dtype is not None):
-        out = net(x)
+        out = net(x, reliability_logits=rel_logit_weight > 0)
     desc, rep, rel = (out[k].float() for k in ("descriptors", "repeatability", "reliability"))
     flow, mask = batch["flow"], batch["mask"]
     cosim = cosim_loss(rep[:n], rep[n:], flow, mask, patch)
     peaky = (peaky_loss(rep[:n], patch) + peaky_loss(rep[n:], patch)) / 2
     reliability, ap = reliability_ap_loss(desc[:n], desc[n:], rel[:n], flow, mask, generator, APSampling())
     loss = cosim + peaky + reliability + ap_weight * (1 - ap)
+    if rel_logit_weight > 0:
+        loss = loss + rel_logit_weight * logit_margin_loss(out["reliability_logits"].float(), rel_logit_margin)
     return {"loss": loss, "cosim": cosim, "peaky": peaky, "reliability": reliability, "ap": ap}
 
 
@@ -235,7 +244,8 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
                 break
             batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
-            losses = training_step(model, batch, cfg.patch, generator, cfg.ap_weight, cfg.precision)
+            losses = training_step(model, batch, cfg.patch, generator, cfg.ap_weight, cfg.precision,
+                                       cfg.rel_logit_weight, cfg.rel_logit_margin)
             optimizer.zero_grad(set_to_none=True)
             losses["loss"].backward()
             optimizer.step()
@@ -293,6 +303,8 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tensorboard", action="store_true", help="also log the losses for TensorBoard (RUN/tensorboard)")
     p.add_argument("--snapshot-every", type=int, help="keep the weights every this many steps (snapshots/)")
     p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
+    p.add_argument("--rel-logit-weight", type=float,
+                   help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)")
     p.add_argument("--seed", type=int)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument("--device")
@@ -303,7 +315,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     overrides = {"frames": args.frames, "steps": args.steps, "batch_size": args.batch_size,
                  "time_budget_s": args.time_budget, "workers": args.workers, "threads": args.threads,
                  "seed": args.seed, "precision": args.precision, "snapshot_every": args.snapshot_every,
-                 "tensorboard": args.tensorboard or None}
+                 "tensorboard": args.tensorboard or None, "rel_logit_weight": args.rel_logit_weight}
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
     if args.frames is not None:
