@@ -85,12 +85,13 @@ class TrainConfig:
 #: noise range (std 5-110 on 0..255, the benchmark goes to 100) and darker exposures.
 PRESETS: dict[str, dict] = {
     "paper": dict(batch_size=8, epochs=25.0, workers=8),
-    # lburst's recipes (ap_weight: see TrainConfig)
+    # lburst's recipes (ap_weight, rel_logit_weight: see TrainConfig)
     "cpu": dict(
         batch_size=4,
         steps=20000,
         workers=1,
         ap_weight=0.25,
+        rel_logit_weight=0.01,
         pair=PairConfig(noise_variance=None, noise_std=(5.0, 110.0), dark_prob=0.3, gamma_range=(0.8, 1.25)),
     ),
 }
