@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
 
@@ -31,11 +30,10 @@ from lburst.paths import shared_dir
 
 
 def checkpoint_step(path: Path) -> int | None:
-    """The training step a checkpoint was saved at (run state, snapshot or shipped file)."""
+    """The training step a checkpoint was saved at (run state, snapshot or shipped file;
+    ``None`` for a published checkpoint)."""
     state = torch.load(path, map_location="cpu", weights_only=True)
     step = state.get("step", state.get("meta", {}).get("step"))
-    if step is None and (m := re.search(r"step_(\d+)", path.name)):
-        step = m.group(1)
     return None if step is None else int(step)
 
 

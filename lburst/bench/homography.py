@@ -45,7 +45,7 @@ from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
 from lburst.simulate import random_motion, simulate_burst, stable_seed
 
 MAX_ROTATION_DEG = 25.0
-LEARNED = ("lburst", "r2d2", "gold")
+LEARNED = ("lburst", "r2d2")
 
 
 @dataclass(frozen=True)
@@ -75,15 +75,14 @@ class MethodRunner:
         from lburst.methods.learned import results_key
 
         self.spec = spec
-        kind = spec.split(":")[0].split(",")[0].removeprefix("oracle-merge+").removeprefix("merge+")
-        options = {"top_k": str(top_k)} if kind in LEARNED else {}
         if spec.startswith("gold:"):
             self.mode, prefix, inner = "gold", "gold:", "r2d2:" + spec[len("gold:"):]
         elif spec.startswith("oracle-merge+"):
             self.mode, prefix, inner = "oracle", "oracle-merge+", spec[len("oracle-merge+"):]
         else:
             self.mode, prefix, inner = "burst", "", spec
-        self.extractor = create(inner, **options)
+        kind = inner.removeprefix("merge+").split(":")[0].split(",")[0]
+        self.extractor = create(inner, **({"top_k": str(top_k)} if kind in LEARNED else {}))
         self.key = prefix + results_key(inner)  # names the feature cache
 
     def __call__(self, image: np.ndarray, burst: np.ndarray, motion: tuple[float, float]) -> Features:

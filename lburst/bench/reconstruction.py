@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from lburst.io import atomic_path
+from lburst.io import atomic_path, file_sha1
 from lburst.methods.learned import results_key
 from lburst.sfm.scene import REFERENCE_FILE
 
@@ -46,7 +46,6 @@ def evaluate(result, reference: Path) -> None:
 
 def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
     """The table row of one method on one scene (from ``result.json`` when already done)."""
-    from lburst.sfm.metrics import reference_sha1
     from lburst.sfm.reconstruct import RESULT_FILE, ReconstructionError, ReconstructionResult, reconstruct_scene
 
     row: dict[str, Any] = {"method": spec, "scene": scene.name, "out": str(out)}
@@ -56,7 +55,7 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
         if previous.method == spec:
             reference = scene / REFERENCE_FILE
             if (reference.is_file() and not previous.error
-                    and previous.metrics.get("reference_sha1") != reference_sha1(reference)):
+                    and previous.metrics.get("reference_sha1") != file_sha1(reference)):
                 evaluate(previous, reference)  # reference added or remade since
             return {**row, **previous.metrics, "registered": len(previous.registered), "error": previous.error}
     try:
@@ -77,8 +76,9 @@ def run_benchmark(scenes: list[str | Path], methods: list[str], out_dir: str | P
     out_dir = Path(out_dir)
     rows = []
     for spec in methods:
+        folder = out_dir / method_slug(results_key(spec))  # hashes the weights once per method
         for scene in map(Path, scenes):
-            rows.append(run_one(scene, spec, out_dir / method_slug(results_key(spec)) / scene.name, force, options))
+            rows.append(run_one(scene, spec, folder / scene.name, force, options))
     means = [{"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
              for spec in methods]
     report = {"scenes": [str(s) for s in scenes], "methods": methods, "options": options, "rows": rows, "means": means}

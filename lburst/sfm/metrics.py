@@ -30,12 +30,12 @@ converge contributes 0 registered images and 0 points, and no trajectory error
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lburst.io import file_sha1
 from lburst.scenes.reference import Reference
 from lburst.sfm.poses import path_length, trajectory_errors
 
@@ -141,11 +141,6 @@ def reference_length(reference: Reference, order: list[str]) -> float:
     return path_length(np.array([centres[n] for n in order if n in centres]))
 
 
-def reference_sha1(path: str | Path) -> str:
-    """SHA-1 of a ``reference.json`` file's bytes."""
-    return hashlib.sha1(Path(path).read_bytes()).hexdigest()
-
-
 def evaluate_against_reference(result: "ReconstructionResult", reference: Reference | str | Path,
                                cameras: dict[str, dict] | None = None,
                                threshold: float = PRECISION_THRESHOLD_PX) -> dict[str, Any]:
@@ -162,7 +157,7 @@ def evaluate_against_reference(result: "ReconstructionResult", reference: Refere
     if not isinstance(reference, Reference):
         from lburst.sfm.scene import reference_cameras
 
-        out["reference_sha1"] = reference_sha1(reference)
+        out["reference_sha1"] = file_sha1(reference)
         cameras = cameras or reference_cameras(reference)
         reference = Reference.load(reference)
     cameras = cameras or {name: reference.camera for name in reference.poses}

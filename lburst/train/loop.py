@@ -245,8 +245,9 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
                 break
             batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
-            losses = training_step(model, batch, cfg.patch, generator, cfg.ap_weight, cfg.precision,
-                                       cfg.rel_logit_weight, cfg.rel_logit_margin)
+            losses = training_step(model, batch, cfg.patch, generator, ap_weight=cfg.ap_weight,
+                                   precision=cfg.precision, rel_logit_weight=cfg.rel_logit_weight,
+                                   rel_logit_margin=cfg.rel_logit_margin)
             optimizer.zero_grad(set_to_none=True)
             losses["loss"].backward()
             optimizer.step()
