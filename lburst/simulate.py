@@ -19,6 +19,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from lburst.motion import BurstMotion
 from lburst.noise import NoiseModel
 
 _BORDERS = {"reflect": cv2.BORDER_REFLECT_101, "replicate": cv2.BORDER_REPLICATE, "constant": cv2.BORDER_CONSTANT}
@@ -55,15 +56,16 @@ def translate(image: np.ndarray, dx: float, dy: float, border: str = "reflect") 
 def simulate_burst(
     image: np.ndarray,
     frames: int = 5,
-    motion: tuple[float, float] | Sequence[tuple[float, float]] = (0.0, 0.0),
+    motion: tuple[float, float] | Sequence[tuple[float, float]] | BurstMotion = (0.0, 0.0),
     noise: NoiseModel | None = None,
     rng: np.random.Generator | int | None = None,
     border: str = "reflect",
 ) -> np.ndarray:
     """A robotic burst ``(N, H, W, 3)`` of ``image`` (H, W, 3) or (H, W), uint8 or uint16.
 
-    ``motion`` is the per-frame translation (dx, dy) in pixels, or one (dx, dy) per
-    frame (absolute offsets, the middle one (0, 0)).  Returns the image's dtype.
+    ``motion`` is the per-frame translation (dx, dy) in pixels, one (dx, dy) per
+    frame (absolute offsets, the middle one (0, 0)), or a :class:`lburst.motion.BurstMotion`
+    (translation, rotation, zoom and smooth non-uniform flow).  Returns the image's dtype.
     """
     image = np.asarray(image)
     if image.dtype not in (np.uint8, np.uint16):
@@ -75,6 +77,11 @@ def simulate_burst(
     if frames < 1 or frames % 2 == 0:
         raise ValueError(f"frames must be odd and positive, got {frames}")
     half = frames // 2
+    if isinstance(motion, BurstMotion):
+        if motion.is_translation:
+            motion = motion.shift
+        else:
+            return _simulate_general(image, frames, motion, noise, as_generator(rng), border)
     offsets = np.asarray(motion, np.float64)
     if offsets.shape == (2,):
         offsets = np.arange(-half, half + 1)[:, None] * offsets[None]
@@ -85,6 +92,28 @@ def simulate_burst(
     burst = np.empty((frames,) + image.shape, image.dtype)
     for i, (dx, dy) in enumerate(offsets):
         frame = image.astype(np.float32) if dx == 0 and dy == 0 else translate(image, dx, dy, border)
+        if noise is not None:
+            frame = noise(frame * (255.0 / top), generator) * (top / 255.0)
+        burst[i] = np.clip(np.round(frame), 0, top)
+    return burst
+
+
+def _simulate_general(image: np.ndarray, frames: int, motion: BurstMotion, noise: NoiseModel | None,
+                      generator: np.random.Generator, border: str) -> np.ndarray:
+    """:func:`simulate_burst` for a motion beyond a translation: frame k is one remap of
+    ``image`` at ``motion.source_points(k)``."""
+    if border not in _BORDERS:
+        raise ValueError(f"unknown border {border!r}: use {', '.join(_BORDERS)}")
+    h, w = image.shape[:2]
+    top = float(np.iinfo(image.dtype).max)
+    source = image.astype(np.float32)
+    burst = np.empty((frames,) + image.shape, image.dtype)
+    for i, k in enumerate(range(-(frames // 2), frames // 2 + 1)):
+        if k == 0:
+            frame = source
+        else:
+            pts = motion.source_points(k, (w, h))
+            frame = cv2.remap(source, pts[..., 0], pts[..., 1], cv2.INTER_LINEAR, borderMode=_BORDERS[border])
         if noise is not None:
             frame = noise(frame * (255.0 / top), generator) * (top / 255.0)
         burst[i] = np.clip(np.round(frame), 0, top)

@@ -220,3 +220,54 @@ def test_an_interrupted_run_keeps_its_finished_steps(photos, tmp_path, monkeypat
     monkeypatch.setattr(loop, "training_step", real_step)
     train([photos], tmp_path, cfg, resume=True, progress=False)
     assert [r["step"] for r in _log(tmp_path / "log.csv")] == ["1", "2", "3", "4"]
+
+
+def test_validation_photos_are_a_fixed_tenth_never_trained_on(tmp_path):
+    from lburst.train.data import is_validation_photo
+
+    names = [f"photo_{i:03d}" for i in range(200)]
+    for name in names:
+        (tmp_path / f"{name}.jpg").write_bytes(b"")
+    train_set = {p.stem for p in list_photos([tmp_path])}
+    val_set = {p.stem for p in list_photos([tmp_path], split="validation")}
+    assert not train_set & val_set and train_set | val_set == set(names)
+    assert 10 <= len(val_set) <= 32  # about a tenth
+    assert all(is_validation_photo(f"other/folder/{n}.png") for n in val_set)  # a rule on the name only
+
+
+def test_burst_preset_pairs_have_a_clean_copy_and_general_motion(photos):
+    from lburst.train.loop import PRESETS
+
+    cfg = replace(PRESETS["burst"]["pair"], crop=64, long_side=(160, 256), max_pair_shift=6)
+    ds = PairDataset(list_photos([photos], split="all"), cfg, seed=0, clean=True)
+    item = ds[0]
+    noise = (item["burst_a"] - item["clean_a"]).std()
+    assert item["clean_a"].shape == item["burst_a"].shape and noise > 5
+    quiet = PairDataset(list_photos([photos], split="all"), replace(cfg, noise_std=(0.0, 0.0), lowlight_prob=0.0),
+                        seed=0, clean=True)[0]
+    assert torch.equal(quiet["burst_a"], quiet["clean_a"])
+
+
+def test_distillation_pulls_the_noisy_output_towards_the_clean_one(photos):
+    from lburst.train.losses import distillation_loss
+
+    cfg = replace(TINY, noise_variance=None, noise_std=(60.0, 60.0))
+    ds = PairDataset(list_photos([photos], split="all"), cfg, seed=0, clean=True)
+    batch = {k: torch.stack([ds[i][k] for i in range(2)]) for k in ds[0]}
+    torch.manual_seed(0)
+    net = LBurstNet(NetConfig(frames=3)).train()
+    same = {"descriptors": torch.nn.functional.normalize(torch.randn(1, 8, 4, 4), dim=1),
+            "repeatability": torch.rand(1, 1, 4, 4), "reliability": torch.rand(1, 1, 4, 4)}
+    assert distillation_loss(same, same).item() == pytest.approx(0.0, abs=1e-6)
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    values = []
+    for _ in range(6):
+        losses = training_step(net, batch, patch=8, generator=torch.Generator().manual_seed(0),
+                               distill_weight=10.0, teacher=net)
+        opt.zero_grad()
+        losses["loss"].backward()
+        opt.step()
+        values.append(losses["distill"].item())
+    assert values[-1] < values[0]
+    with pytest.raises(ValueError, match="teacher"):
+        training_step(net, batch, patch=8, distill_weight=1.0)

@@ -2,11 +2,17 @@
 
 Sample ``i`` is drawn with ``numpy.random.default_rng([seed, i])``, so the stream is
 the same on every run and a resumed run continues it exactly where it stopped.
+
+A fixed tenth of the photos is held out for validation (:func:`is_validation_photo`,
+a rule on the file name, so ``train/`` and ``train512/`` split alike) and never trained
+on: :func:`list_photos` leaves it out unless asked for it.
 """
 
 from __future__ import annotations
 
+import zlib
 from pathlib import Path
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -18,27 +24,44 @@ from lburst.train.pairs import PairConfig, training_pair
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".ppm"}
 
 
-def list_photos(folders: list[str | Path]) -> list[Path]:
-    """All images under ``folders`` (recursively), sorted; error if there are none."""
+Split = Literal["train", "validation", "all"]
+
+
+def is_validation_photo(path: str | Path) -> bool:
+    """The held-out tenth: photos whose file stem has a CRC-32 divisible by 10."""
+    return zlib.crc32(Path(path).stem.encode()) % 10 == 0
+
+
+def list_photos(folders: list[str | Path], split: Split = "train") -> list[Path]:
+    """Images under ``folders`` (recursively), sorted; error if there are none.
+
+    ``split``: ``'train'`` leaves out the validation tenth (:func:`is_validation_photo`),
+    ``'validation'`` keeps only it, ``'all'`` keeps every photo."""
+    if split not in ("train", "validation", "all"):
+        raise ValueError(f"split must be 'train', 'validation' or 'all', got {split!r}")
     photos: list[Path] = []
     for folder in folders:
         folder = Path(folder)
         if not folder.is_dir():
             raise FileNotFoundError(f"{folder}: training photo folder not found")
-        photos += sorted(p for p in folder.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+        found = sorted(p for p in folder.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+        photos += [p for p in found if split == "all" or is_validation_photo(p) == (split == "validation")]
     if not photos:
-        raise FileNotFoundError(f"no photos ({', '.join(sorted(IMAGE_SUFFIXES))}) under {', '.join(map(str, folders))}")
+        raise FileNotFoundError(
+            f"no {split} photos ({', '.join(sorted(IMAGE_SUFFIXES))}) under {', '.join(map(str, folders))}")
     return photos
 
 
 class PairDataset(Dataset):
     """Index ``i`` gives pair ``i`` of the stream as tensors:
-    ``burst_a``, ``burst_b`` (N, 3, crop, crop) float32 0..255, ``flow`` (crop, crop, 2), ``mask``."""
+    ``burst_a``, ``burst_b`` (N, 3, crop, crop) float32 0..255, ``flow`` (crop, crop, 2), ``mask``
+    and, with ``clean``, ``clean_a`` (burst A before the noise)."""
 
-    def __init__(self, photos: list[Path], cfg: PairConfig, seed: int = 0) -> None:
+    def __init__(self, photos: list[Path], cfg: PairConfig, seed: int = 0, clean: bool = False) -> None:
         self.photos = photos
         self.cfg = cfg
         self.seed = seed
+        self.clean = clean
 
     def __len__(self) -> int:
         return 2**62
@@ -53,12 +76,15 @@ class PairDataset(Dataset):
         else:
             raise OSError(f"could not read training photos (last tried {path})")
         pair = training_pair(cv2.cvtColor(photo, cv2.COLOR_BGR2RGB), rng, self.cfg)
-        return {
+        item = {
             "burst_a": torch.from_numpy(pair.burst_a).permute(0, 3, 1, 2),
             "burst_b": torch.from_numpy(pair.burst_b).permute(0, 3, 1, 2),
             "flow": torch.from_numpy(pair.flow),
             "mask": torch.from_numpy(pair.mask),
         }
+        if self.clean:
+            item["clean_a"] = torch.from_numpy(pair.clean_a).permute(0, 3, 1, 2)
+        return item
 
 
 def init_worker(_: int) -> None:

@@ -25,13 +25,15 @@ from tqdm import tqdm
 
 from lburst.io import atomic_path
 from lburst.paths import shared_dir
-from lburst.model import AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, LBurstNet, NetConfig, autocast_dtype, save_checkpoint
+from lburst.model import (AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, LBurstNet, NetConfig, autocast_dtype,
+                          load_checkpoint, save_checkpoint)
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
-from lburst.train.losses import APSampling, cosim_loss, logit_margin_loss, peaky_loss, reliability_ap_loss
+from lburst.train.losses import (APSampling, cosim_loss, distillation_loss, logit_margin_loss, peaky_loss,
+                                 reliability_ap_loss)
 from lburst.train.pairs import PairConfig
 
-LOG_FIELDS = ("step", "seconds", "loss", "cosim", "peaky", "reliability", "ap")
+LOG_FIELDS = ("step", "seconds", "loss", "cosim", "peaky", "reliability", "ap", "distill")
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,14 @@ class TrainConfig:
     ``snapshots/step_XXXXXX.pt`` in the published layout (a few MB each), so the
     benchmark can follow a run's progress.
 
+    ``distill_weight`` adds ``distill_weight * distillation_loss``: the network on burst A
+    without noise, in eval mode and without gradient, is the teacher of the network on
+    the noisy burst A at every pixel (descriptors and both maps), so every step teaches
+    noise invariance directly (:func:`lburst.train.losses.distillation_loss`).
+
+    ``init`` starts the weights from a checkpoint of this project's own (for example the
+    shipped ``lburst-b5``) instead of at random; the optimizer starts fresh.
+
     ``tensorboard`` also writes the losses for TensorBoard to ``tensorboard/`` in the run.
 
     ``precision`` ``'bf16'`` (or ``'fp16'`` on a GPU) runs the network's forward pass under
@@ -71,6 +81,8 @@ class TrainConfig:
     ap_weight: float = 0.0
     rel_logit_weight: float = 0.0
     rel_logit_margin: float = 4.0
+    distill_weight: float = 0.0
+    init: str | None = None
     seed: int = 0
     workers: int = 1
     threads: int | None = None
@@ -97,6 +109,18 @@ PRESETS: dict[str, dict] = {
 }
 #: ``gpu``: the ``cpu`` recipe with a larger batch and more loader workers.
 PRESETS["gpu"] = dict(PRESETS["cpu"], batch_size=8, steps=100000, workers=7, checkpoint_every_s=60.0)
+#: ``burst``: the burst-against-noise recipe, for fine-tuning (``--init``): heavy noise
+#: (Gaussian std 25-120 on 0..255, or physical low light at 3-60 photons for a third of
+#: the bursts), small in-burst motion (up to 3 px of translation, 1 degree of rotation,
+#: 1% zoom and 1 px of smooth non-uniform flow per frame), and dense self-distillation
+#: from the noise-free burst.
+PRESETS["burst"] = dict(
+    PRESETS["cpu"],
+    distill_weight=1.0,
+    pair=PairConfig(noise_variance=None, noise_std=(25.0, 120.0), dark_prob=0.3, gamma_range=(0.8, 1.25),
+                    max_burst_motion=12.0, burst_rotation_deg=1.0, burst_zoom=0.01, burst_flow_px=1.0,
+                    lowlight_prob=0.33, lowlight_photons=(3.0, 60.0)),
+)
 
 
 def _normalise(burst: torch.Tensor) -> torch.Tensor:
@@ -110,8 +134,12 @@ def _normalise(burst: torch.Tensor) -> torch.Tensor:
 def training_step(
     net: torch.nn.Module, batch: dict[str, torch.Tensor], patch: int, generator: torch.Generator | None = None,
     ap_weight: float = 0.0, precision: str = "fp32", rel_logit_weight: float = 0.0, rel_logit_margin: float = 4.0,
+    distill_weight: float = 0.0, teacher: torch.nn.Module | None = None,
 ) -> dict[str, torch.Tensor]:
-    """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``)."""
+    """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``).
+
+    With ``distill_weight`` > 0 the batch holds ``clean_a`` and ``teacher`` (the network
+    itself, unwrapped) runs on it in eval mode without gradient."""
     dtype = autocast_dtype(precision)
     n = batch["burst_a"].shape[0]
     x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
@@ -126,7 +154,20 @@ def training_step(
     loss = cosim + peaky + reliability + ap_weight * (1 - ap)
     if rel_logit_weight > 0:
         loss = loss + rel_logit_weight * logit_margin_loss(out["reliability_logits"].float(), rel_logit_margin)
-    return {"loss": loss, "cosim": cosim, "peaky": peaky, "reliability": reliability, "ap": ap}
+    losses = {"cosim": cosim, "peaky": peaky, "reliability": reliability, "ap": ap}
+    if distill_weight > 0:
+        if teacher is None or "clean_a" not in batch:
+            raise ValueError("distill_weight > 0 needs a teacher and the batch's clean_a")
+        clean = _normalise(batch["clean_a"]).contiguous(memory_format=torch.channels_last)
+        was_training = teacher.training
+        teacher.eval()
+        with torch.no_grad(), torch.autocast(device_type=x.device.type, dtype=dtype, enabled=dtype is not None):
+            target = teacher(clean)
+        teacher.train(was_training)
+        student = {k: out[k][:n].float() for k in ("descriptors", "repeatability", "reliability")}
+        losses["distill"] = distillation_loss(student, {k: v.float() for k, v in target.items()})
+        loss = loss + distill_weight * losses["distill"]
+    return {"loss": loss, **losses}
 
 
 def _read_log(path: Path, upto: int) -> list[dict]:
@@ -205,7 +246,13 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     photos = list_photos([Path(p) for p in photo_folders])
     total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / (cfg.batch_size * ctx.world))
     torch.manual_seed(cfg.seed)
-    net = LBurstNet(NetConfig(frames=cfg.frames)).to(device).to(memory_format=torch.channels_last)
+    net = LBurstNet(NetConfig(frames=cfg.frames))
+    if cfg.init and state is None:
+        init_net, _ = load_checkpoint(cfg.init)
+        if init_net.config.frames != cfg.frames:
+            raise ValueError(f"{cfg.init}: a {init_net.config.frames}-frame network, but the run has {cfg.frames} frames")
+        net.load_state_dict(init_net.state_dict())
+    net = net.to(device).to(memory_format=torch.channels_last)
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     if state is not None:
         net.load_state_dict(state["state_dict"])
@@ -222,7 +269,7 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             tmp.write_text(json.dumps(_config_dict(cfg), indent=2))
     log = _read_log(out / "log.csv", step)
     loader = DataLoader(
-        PairDataset(photos, cfg.pair, cfg.seed),
+        PairDataset(photos, cfg.pair, cfg.seed, clean=cfg.distill_weight > 0),
         batch_size=cfg.batch_size,
         sampler=StreamSampler(step * cfg.batch_size * ctx.world + ctx.rank, ctx.world),
         num_workers=cfg.workers,
@@ -247,7 +294,8 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
             losses = training_step(model, batch, cfg.patch, generator, ap_weight=cfg.ap_weight,
                                    precision=cfg.precision, rel_logit_weight=cfg.rel_logit_weight,
-                                   rel_logit_margin=cfg.rel_logit_margin)
+                                   rel_logit_margin=cfg.rel_logit_margin, distill_weight=cfg.distill_weight,
+                                   teacher=net)
             optimizer.zero_grad(set_to_none=True)
             losses["loss"].backward()
             optimizer.step()
@@ -307,6 +355,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
     p.add_argument("--rel-logit-weight", type=float,
                    help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)")
+    p.add_argument("--distill-weight", type=float,
+                   help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)")
+    p.add_argument("--init", help="start from this checkpoint of our own (e.g. lburst/weights/lburst-b5.pt)")
     p.add_argument("--seed", type=int)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument("--device")
@@ -317,7 +368,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     overrides = {"frames": args.frames, "steps": args.steps, "batch_size": args.batch_size,
                  "time_budget_s": args.time_budget, "workers": args.workers, "threads": args.threads,
                  "seed": args.seed, "precision": args.precision, "snapshot_every": args.snapshot_every,
-                 "tensorboard": args.tensorboard or None, "rel_logit_weight": args.rel_logit_weight}
+                 "tensorboard": args.tensorboard or None, "rel_logit_weight": args.rel_logit_weight,
+                 "distill_weight": args.distill_weight, "init": args.init}
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
     if args.frames is not None:

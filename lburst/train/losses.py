@@ -174,3 +174,13 @@ def logit_margin_loss(logits: torch.Tensor, margin: float = 4.0) -> torch.Tensor
     no pixel above the 0.7 keypoint threshold at step 903.
     """
     return torch.relu(logits.abs() - margin).square().mean()
+
+
+def distillation_loss(student: dict[str, torch.Tensor], teacher: dict[str, torch.Tensor]) -> torch.Tensor:
+    """Dense self-distillation: the network on the noisy burst (``student``) against the
+    same network on the noise-free burst (``teacher``, no gradient), at every pixel:
+    ``mean(1 - cos(descriptors)) + mean|repeatability| + mean|reliability|`` differences."""
+    desc = 1 - (student["descriptors"] * teacher["descriptors"].detach()).sum(1)
+    rep = (student["repeatability"] - teacher["repeatability"].detach()).abs()
+    rel = (student["reliability"] - teacher["reliability"].detach()).abs()
+    return desc.mean() + rep.mean() + rel.mean()

@@ -15,6 +15,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lburst.motion import BurstMotion
+from lburst.noise import LowLightNoise
+
 
 @dataclass(frozen=True)
 class PairConfig:
@@ -36,6 +39,13 @@ class PairConfig:
         dark_prob, dark_range: probability and range of a per-burst exposure factor
             applied before the noise (darker images, same noise: lower SNR).
         gamma_range: per-burst gamma jitter applied before the exposure factor.
+        burst_rotation_deg, burst_zoom, burst_flow_px: in-burst motion beyond the
+            translation (:class:`lburst.motion.BurstMotion`): largest rotation per frame,
+            largest relative zoom per frame, largest std of the smooth non-uniform flow
+            per frame (drawn uniformly per burst).
+        lowlight_prob, lowlight_photons: probability of physical low-light noise
+            (:class:`lburst.noise.LowLightNoise`, photons at white drawn log-uniformly
+            in the range) instead of the Gaussian noise.
     """
 
     frames: int = 5
@@ -51,17 +61,24 @@ class PairConfig:
     dark_prob: float = 0.0
     dark_range: tuple[float, float] = (0.15, 1.0)
     gamma_range: tuple[float, float] = (1.0, 1.0)
+    burst_rotation_deg: float = 0.0
+    burst_zoom: float = 0.0
+    burst_flow_px: float = 0.0
+    lowlight_prob: float = 0.0
+    lowlight_photons: tuple[float, float] = (3.0, 60.0)
 
 
 @dataclass
 class TrainingPair:
     """``burst_a``, ``burst_b``: (N, crop, crop, 3) float32 on the 0..255 scale, noisy,
-    rounded and clipped; ``flow``: (crop, crop, 2) float32, the absolute position (x, y)
+    rounded and clipped; ``clean_a``: burst A before the noise (rounded and clipped), the
+    target of self-distillation; ``flow``: (crop, crop, 2) float32, the absolute position (x, y)
     in B's common frame of every pixel of A's common frame; ``mask``: (crop, crop) bool,
     where that position lies inside B; ``homography``: the 3x3 ``G`` (A to B)."""
 
     burst_a: np.ndarray
     burst_b: np.ndarray
+    clean_a: np.ndarray
     flow: np.ndarray
     mask: np.ndarray
     homography: np.ndarray
@@ -95,28 +112,42 @@ def random_homography(rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
     return g / g[2, 2]
 
 
-def _burst_motion(rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
-    """Per-frame motion (dx, dy) with total length up to ``max_burst_motion`` over the burst."""
+def _burst_motion(rng: np.random.Generator, cfg: PairConfig) -> BurstMotion:
+    """In-burst motion: a translation of total length up to ``max_burst_motion`` over the
+    burst, plus (when configured) rotation, zoom and a smooth non-uniform flow."""
     if cfg.frames == 1:
-        return np.zeros(2)
+        return BurstMotion()
     length = rng.uniform(0, cfg.max_burst_motion) / (cfg.frames - 1)
     angle = rng.uniform(0, 2 * np.pi)
-    return length * np.array([np.cos(angle), np.sin(angle)])
+    shift = (float(length * np.cos(angle)), float(length * np.sin(angle)))
+    rotation = float(rng.uniform(-cfg.burst_rotation_deg, cfg.burst_rotation_deg)) if cfg.burst_rotation_deg else 0.0
+    zoom = float(rng.uniform(-cfg.burst_zoom, cfg.burst_zoom)) if cfg.burst_zoom else 0.0
+    flow = float(rng.uniform(0, cfg.burst_flow_px)) if cfg.burst_flow_px else 0.0
+    return BurstMotion(shift, rotation, zoom, flow, int(rng.integers(2**31)) if flow else 0)
 
 
-def _photometric(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
-    """Per-burst gamma and exposure, then per-frame Gaussian noise; round and clip."""
+def _exposure(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
+    """Per-burst gamma and exposure factor (the clean, darkened burst)."""
     gamma = rng.uniform(*cfg.gamma_range)
     if gamma != 1.0:
         frames = 255.0 * (frames / 255.0) ** gamma
     if rng.random() < cfg.dark_prob:
         frames = frames * rng.uniform(*cfg.dark_range)
-    if cfg.noise_variance is not None:
-        variance = rng.uniform(*cfg.noise_variance)
-        std = np.sqrt(variance) * np.array([0.229, 0.224, 0.225]) * 255.0
+    return frames
+
+
+def _noise(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
+    """Per-frame, per-channel noise (Gaussian, or physical low light), rounded and clipped."""
+    if cfg.lowlight_prob and rng.random() < cfg.lowlight_prob:
+        photons = float(np.exp(rng.uniform(*np.log(cfg.lowlight_photons))))
+        noisy = LowLightNoise(photons)(frames, rng)
     else:
-        std = np.full(3, rng.uniform(*cfg.noise_std))
-    noisy = frames + rng.standard_normal(frames.shape, dtype=np.float32) * std.astype(np.float32)
+        if cfg.noise_variance is not None:
+            variance = rng.uniform(*cfg.noise_variance)
+            std = np.sqrt(variance) * np.array([0.229, 0.224, 0.225]) * 255.0
+        else:
+            std = np.full(3, rng.uniform(*cfg.noise_std))
+        noisy = frames + rng.standard_normal(frames.shape, dtype=np.float32) * std.astype(np.float32)
     return np.clip(np.round(noisy), 0, 255).astype(np.float32)
 
 
@@ -132,14 +163,23 @@ def _rescale(photo: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np
     return cv2.resize(photo, size, interpolation=interp)
 
 
-def _render(photo: np.ndarray, to_photo: np.ndarray, crop: int, motion: np.ndarray, frames: int) -> np.ndarray:
-    """Frames whose common frame maps pixel p to photo pixel ``to_photo @ p``."""
+def _render(photo: np.ndarray, to_photo: np.ndarray, crop: int, motion: BurstMotion, frames: int) -> np.ndarray:
+    """Frames whose common frame maps pixel p to photo pixel ``to_photo @ p``; frame k
+    shows the common frame at ``motion.source_points(k)``."""
     out = np.empty((frames, crop, crop, 3), np.float32)
     for i, k in enumerate(range(-(frames // 2), frames // 2 + 1)):
-        m = to_photo @ _translation(-k * motion[0], -k * motion[1])
-        out[i] = cv2.warpPerspective(
-            photo, m, (crop, crop), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REFLECT_101
-        )
+        if motion.is_translation:  # one exact homography per frame
+            m = to_photo @ _translation(-k * motion.shift[0], -k * motion.shift[1])
+            out[i] = cv2.warpPerspective(
+                photo, m, (crop, crop), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                borderMode=cv2.BORDER_REFLECT_101,
+            )
+            continue
+        pts = motion.source_points(k, (crop, crop)).astype(np.float64)
+        q = pts @ to_photo[:2, :2].T + to_photo[:2, 2]
+        z = pts @ to_photo[2, :2] + to_photo[2, 2]
+        q = (q / z[..., None]).astype(np.float32)
+        out[i] = cv2.remap(photo, q[..., 0], q[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
     return out
 
 
@@ -158,10 +198,12 @@ def training_pair(photo: np.ndarray, rng: np.random.Generator, cfg: PairConfig =
     b_to_photo = a_to_photo @ np.linalg.inv(g)
     burst_a = _render(photo, a_to_photo, crop, _burst_motion(rng, cfg), cfg.frames)
     burst_b = _render(photo, b_to_photo, crop, _burst_motion(rng, cfg), cfg.frames)
-    burst_a = _photometric(burst_a, rng, cfg)
-    burst_b = _photometric(burst_b, rng, cfg)
+    clean_a = _exposure(burst_a, rng, cfg)
+    burst_a = _noise(clean_a, rng, cfg)
+    burst_b = _noise(_exposure(burst_b, rng, cfg), rng, cfg)
     ys, xs = np.mgrid[0:crop, 0:crop].astype(np.float64)
     pts = np.stack([xs, ys, np.ones_like(xs)], -1) @ g.T
     flow = (pts[..., :2] / pts[..., 2:]).astype(np.float32)
     mask = (flow[..., 0] >= 0) & (flow[..., 0] <= crop - 1) & (flow[..., 1] >= 0) & (flow[..., 1] <= crop - 1)
-    return TrainingPair(burst_a, burst_b, flow, mask, g)
+    clean_a = np.clip(np.round(clean_a), 0, 255).astype(np.float32)
+    return TrainingPair(burst_a, burst_b, clean_a, flow, mask, g)
