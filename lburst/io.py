@@ -65,12 +65,59 @@ def natural_key(name: str) -> list:
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
 
 
+def opencv_path(path: str | Path) -> str:
+    """``path`` as the str that OpenCV (or pycolmap) takes: ``BurstError`` for a name that is
+    not valid UTF-8 (OpenCV crashes the process on one).  Images are read and written
+    through bytes (:func:`decode_file`, :func:`write_image`) and need no such check."""
+    text = str(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise BurstError(f"{text.encode('utf-8', 'backslashreplace').decode()}: the name is not valid UTF-8, "
+                         f"which OpenCV cannot open; rename it") from None
+    return text
+
+
+def decode_file(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray | None:
+    """The image in file ``path`` as OpenCV decodes it (BGR), or ``None`` if it cannot be decoded.
+
+    The file is read as bytes, so any file name works (``cv2.imread`` crashes on names
+    that are not valid UTF-8).  A JPEG without its end marker (a truncated file, which
+    libjpeg would fill with grey) counts as undecodable."""
+    data = np.fromfile(path, np.uint8)
+    if data.size == 0:
+        return None
+    if data[:2].tobytes() == b"\xff\xd8" and not _jpeg_complete(data.tobytes()):
+        return None
+    return cv2.imdecode(data, flags)
+
+
+def _jpeg_complete(data: bytes) -> bool:
+    """True when the last scan of a JPEG is followed by its end-of-image marker (entropy-coded
+    data cannot hold ``FF D9``: a coded ``FF`` is always followed by ``00``)."""
+    scan = data.rfind(b"\xff\xda")
+    return scan >= 0 and data.find(b"\xff\xd9", scan) >= 0
+
+
+def write_image(path: str | Path, rgb: np.ndarray) -> None:
+    """Write an RGB (or grayscale) uint8/uint16 image; the format is ``path``'s suffix.
+
+    Encoded in memory and written as bytes, so any file name works; ``OSError`` naming
+    the file when it cannot be encoded or written."""
+    path = Path(path)
+    image = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR) if rgb.ndim == 3 else rgb
+    ok, data = cv2.imencode(path.suffix or ".png", image)
+    if not ok:
+        raise OSError(f"{path}: could not encode a {rgb.dtype} {rgb.shape} image as {path.suffix or '.png'}")
+    data.tofile(path)
+
+
 def read_image(path: str | Path) -> np.ndarray:
     """An image file as RGB ``(H, W, 3)`` uint8 or uint16 (grayscale repeated, alpha dropped)."""
     path = Path(path)
     if not path.is_file():
         raise BurstError(f"{path}: no such file")
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    image = decode_file(path)
     if image is None:
         raise BurstError(f"{path}: not a readable image (corrupt, truncated or unsupported format)")
     if image.dtype not in (np.uint8, np.uint16):
@@ -87,7 +134,7 @@ def read_image(path: str | Path) -> np.ndarray:
 
 
 def _read_video(path: Path, frames: slice | tuple[int, int] | None) -> list[np.ndarray]:
-    capture = cv2.VideoCapture(str(path))
+    capture = cv2.VideoCapture(opencv_path(path))
     if not capture.isOpened():
         raise BurstError(f"{path}: not a readable video")
     count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
@@ -167,8 +214,7 @@ def save_burst(burst: np.ndarray, folder: str | Path) -> list[Path]:
     for i, frame in enumerate(burst):
         path = folder / f"frame_{i:03d}.png"
         with atomic_path(path) as tmp:
-            if not cv2.imwrite(str(tmp), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)):
-                raise OSError(f"{path}: could not write")
+            write_image(tmp, frame)
         paths.append(path)
     return paths
 

@@ -261,8 +261,7 @@ def _write_burst(directory: Path, frames: np.ndarray) -> None:
     tmp = Path(tempfile.mkdtemp(dir=directory.parent, prefix=f".{directory.name}.", suffix=".tmp"))
     try:
         for k, frame in enumerate(frames):
-            if not cv2.imwrite(str(tmp / f"frame_{k:03d}.png"), frame[..., ::-1]):
-                raise OSError(f"could not write {tmp / f'frame_{k:03d}.png'}")
+            write_image(tmp / f"frame_{k:03d}.png", frame)
         os.replace(tmp, directory)
     finally:
         if tmp.exists():

@@ -33,7 +33,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -58,8 +57,7 @@ def write_burst(folder: Path, burst: np.ndarray) -> None:
     tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}."))
     try:
         for k, frame in enumerate(burst):
-            if not cv2.imwrite(str(tmp / frame_name(k)), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)):
-                raise OSError(f"cannot write {tmp / frame_name(k)}")
+            write_image(tmp / frame_name(k), frame)
         shutil.rmtree(folder, ignore_errors=True)
         tmp.rename(folder)
     finally:

@@ -33,7 +33,7 @@ import cv2  # noqa: F401  (must be loaded before pycolmap, see module docstring)
 import numpy as np
 import pycolmap
 
-from lburst.io import atomic_path
+from lburst.io import atomic_path, opencv_path
 
 DEFAULT_FOCAL_FACTOR = 1.2  # COLMAP's own default prior: f = 1.2 * max(W, H)
 
@@ -125,7 +125,7 @@ def default_camera(width: int, height: int, model: str = "SIMPLE_RADIAL", focal:
 
 def exif_camera(path: str | Path, model: str = "SIMPLE_RADIAL") -> dict | None:
     """Camera dict with the focal length from the image's EXIF (COLMAP's sensor database), or ``None``."""
-    camera = pycolmap.infer_camera_from_image(str(path))
+    camera = pycolmap.infer_camera_from_image(opencv_path(path))
     if not camera.has_prior_focal_length:
         return None
     return default_camera(camera.width, camera.height, model, focal=float(camera.focal_length))

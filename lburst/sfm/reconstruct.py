@@ -27,7 +27,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -133,9 +132,18 @@ class ReconstructionResult:
 
 
 def _safe_name(name: str) -> str:
-    if "/" in name or name.startswith("."):
-        raise ReconstructionError(f"image name {name!r} cannot be used as a file name")
+    """``name`` if COLMAP can store it: no ``/``, not hidden, valid UTF-8."""
+    if "/" in name or name.startswith(".") or not name.isprintable() or not _utf8(name):
+        raise ReconstructionError(f"image name {name!r} cannot be used as a COLMAP image name (rename it)")
     return name
+
+
+def _utf8(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
@@ -179,8 +187,7 @@ def scene_features(scene: Scene, spec: str, out: Path, progress: bool = True,
         burst = load_item(item)
         common = burst[len(burst) // 2]
         with atomic_path(image_path) as tmp:
-            if not cv2.imwrite(str(tmp), cv2.cvtColor(to_uint8(common), cv2.COLOR_RGB2BGR)):
-                raise ReconstructionError(f"cannot write {image_path}")
+            write_image(tmp, to_uint8(common))
         if cached is None:
             if extractor is None:
                 from lburst.methods import create
@@ -241,6 +248,8 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
 
     opts = ReconstructOptions(**options)
     out = Path(out_dir)
+    if not _utf8(str(out.resolve())):
+        raise ReconstructionError(f"{out!s}: the output path is not valid UTF-8, which COLMAP cannot use")
     try:
         scene = list_scene(scene_dir)
         if len(scene.items) < 2:

@@ -70,7 +70,7 @@ class PairDataset(Dataset):
         rng = np.random.default_rng([self.seed, index])
         for _ in range(10):
             path = self.photos[rng.integers(len(self.photos))]
-            photo = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            photo = decode_file(path, cv2.IMREAD_COLOR)
             if photo is not None:
                 break
         else:
