@@ -14,6 +14,7 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("show",), "lburst.commands.show", "picture of a burst's keypoints and confidence maps"),
     (("simulate", "burst"), "lburst.commands.simulate", "a low-light burst from one photo"),
     (("simulate", "scene"), "lburst.scenes.photo_scene", "a low-light burst scene from a multi-view photo set"),
+    (("simulate", "sequences"), "lburst.bench.validation", "HPatches-style homography sequences from photos"),
     (("simulate", "flight"), "lburst.scenes.night_flight", "the synthetic night flight scene with exact ground truth"),
     (("train",), "lburst.train.loop", "self-supervised training of a burst (or single-image) network"),
     (("bench", "homography"), "lburst.bench.homography", "noisy-burst homography benchmark (MMA, repeatability)"),

@@ -77,6 +77,26 @@ class BurstMotion:
         return pts
 
 
+    def frame_points(self, k: int, size: tuple[int, int], iterations: int = 4) -> np.ndarray:
+        """The inverse of :meth:`source_points`: for every common-frame pixel ``x``, the
+        position ``p`` in frame ``k`` that shows it (``S_k(p) = x``), (height, width, 2)
+        float32.  Exact for the affine part; the flow is inverted by fixed-point
+        iteration ``p = A_k(x + k D(p))`` (converges since ``D`` is smooth)."""
+        w, h = size
+        ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+        a = self.affine(k, size)
+        grid = np.stack([xs, ys], -1)
+        if not self.flow_px or k == 0:
+            return (grid @ a[:2, :2].T.astype(np.float32) + a[:2, 2].astype(np.float32)).astype(np.float32)
+        d = self.field(size)
+        p = grid.copy()
+        for _ in range(iterations):
+            dp = cv2.remap(d, p[..., 0], p[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            q = grid + k * dp
+            p = (q @ a[:2, :2].T.astype(np.float32) + a[:2, 2].astype(np.float32)).astype(np.float32)
+        return p
+
+
 def sample_motion(rng: np.random.Generator, max_shift: float, max_rotation_deg: float = 0.0,
                   max_zoom: float = 0.0, max_flow_px: float = 0.0) -> BurstMotion:
     """A random :class:`BurstMotion`: shift uniform in ``[-max_shift, max_shift]^2``,

@@ -53,12 +53,27 @@ def test_protocol_burst_is_deterministic_and_keeps_the_middle_frame():
     a, motion_a = protocol_burst(image, "graf", 2, level)
     b, motion_b = protocol_burst(image, "graf", 2, level)
     np.testing.assert_array_equal(a, b)
-    assert motion_a == motion_b and max(abs(m) for m in motion_a) <= 3
+    assert motion_a == motion_b and motion_a.is_translation and max(abs(m) for m in motion_a.shift) <= 3
     clean, _ = protocol_burst(image, "graf", 2, NoiseLevel("sigma0", None))
     np.testing.assert_array_equal(clean[2], image)
     other, motion_other = protocol_burst(image, "graf", 2, NoiseLevel("sigma100", GaussianNoise(100.0)))
     assert (other != a).any() and motion_other != motion_a  # another noise level draws another seed
     assert [lv.label for lv in noise_levels([25, 0], ["lowlight:night"])] == ["sigma25", "sigma0", "lowlight:night"]
+
+
+def test_rotating_burst_levels_are_labelled_and_the_oracle_merge_undoes_their_motion():
+    from lburst.bench.homography import MotionRange, oracle_merge
+
+    image = skimage.data.astronaut()[100:228, 100:260]
+    (level,) = noise_levels([0], [], MotionRange(1.0, 0.01, 1.0))
+    assert level.label == "sigma0+rot1-zoom0.01-flow1"
+    burst, motion = protocol_burst(image, "graf", 2, level)
+    assert not motion.is_translation and abs(motion.rotation_deg) <= 1 and abs(motion.zoom) <= 0.01
+    np.testing.assert_array_equal(burst[2], image)
+    assert np.abs(burst[0].astype(float) - image).mean() > 5  # the end frames really moved
+    merged = oracle_merge(burst, motion)
+    inner = (slice(12, -12), slice(12, -12))
+    assert np.abs(merged[inner] - image[inner]).mean() < 4.0  # bilinear blur only
 
 
 def test_end_to_end_with_sift_on_a_clean_known_sequence(tmp_path):

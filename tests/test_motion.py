@@ -55,3 +55,19 @@ def test_sample_motion_is_seeded_and_bounded():
     assert a == b
     assert max(map(abs, a.shift)) <= 3 and abs(a.rotation_deg) <= 1 and abs(a.zoom) <= 0.01
     assert sample_motion(np.random.default_rng(1), 2.0).is_translation
+
+
+def test_frame_points_invert_source_points():
+    m = BurstMotion(shift=(1.0, -0.5), rotation_deg=0.7, zoom=0.01, flow_px=1.0, flow_seed=5)
+    size = (96, 64)
+    for k in (-2, 1, 2):
+        p = m.frame_points(k, size)
+        # S_k(p) must give back the common-frame grid: sample S_k at p
+        s = m.source_points(k, size)
+        import cv2
+
+        back = cv2.remap(s, p[..., 0], p[..., 1], cv2.INTER_LINEAR)
+        grid = np.stack(np.mgrid[0:64, 0:96][::-1], -1)
+        inside = (p[..., 0] > 1) & (p[..., 0] < 94) & (p[..., 1] > 1) & (p[..., 1] < 62)
+        err = np.abs(back - grid)[inside]  # cv2.remap quantises positions to 1/32 px
+        assert err.max() < 0.1 and err.mean() < 0.02

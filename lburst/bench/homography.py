@@ -9,10 +9,14 @@ Protocol (reproducible by anyone):
    borders, then Gaussian noise of std sigma (0..255) on every frame and channel,
    rounded and clipped (:func:`lburst.simulate.simulate_burst`); motion and noise come
    from one generator seeded by ``stable_seed(sequence, image index, noise label)``.
-   A ``--noise SPEC`` level uses that :mod:`lburst.noise` model instead.
+   A ``--noise SPEC`` level uses that :mod:`lburst.noise` model instead.  With
+   ``--burst-rotation``, ``--burst-zoom`` or ``--burst-flow`` the in-burst motion also
+   rotates, zooms and flows non-uniformly (:class:`lburst.motion.BurstMotion`, each
+   drawn uniformly up to the given per-frame maximum); such levels are labelled and
+   seeded with the motion's name too.
 3. Methods: any :func:`lburst.methods.create` spec, plus ``gold:CKPT`` (the single-image
    network on the clean image) and ``oracle-merge+X`` (frames aligned with the true
-   shifts, averaged, then X).  Learned methods keep the top 5000 keypoints.
+   motion, averaged, then X).  Learned methods keep the top 5000 keypoints.
 4. Mutual nearest neighbours; metrics of :mod:`lburst.bench.metrics` for the pairs
    (1, K), K = 2..6; averaged over the 5 pairs of a sequence, then over sequences.
    A second table keeps only pairs rotated by 25 degrees or less (pooled).
@@ -30,9 +34,10 @@ import json
 import re
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -41,6 +46,7 @@ from lburst.bench.sequences import Sequence, list_sequences, read_sequence
 from lburst.features import Features
 from lburst.io import atomic_path
 from lburst.match import mutual_nearest_neighbours
+from lburst.motion import BurstMotion, sample_motion
 from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
 from lburst.simulate import random_motion, simulate_burst, stable_seed
 
@@ -49,22 +55,57 @@ LEARNED = ("lburst", "r2d2")
 
 
 @dataclass(frozen=True)
+class MotionRange:
+    """Largest in-burst motion per frame beyond the shift (0: a pure translation)."""
+
+    rotation_deg: float = 0.0
+    zoom: float = 0.0
+    flow_px: float = 0.0
+
+    @property
+    def label(self) -> str:
+        if not (self.rotation_deg or self.zoom or self.flow_px):
+            return ""
+        return f"rot{self.rotation_deg:g}-zoom{self.zoom:g}-flow{self.flow_px:g}"
+
+
+@dataclass(frozen=True)
 class NoiseLevel:
     label: str
     model: NoiseModel | None
+    motion: MotionRange = MotionRange()
 
 
-def noise_levels(sigmas: list[float], specs: list[str]) -> list[NoiseLevel]:
-    levels = [NoiseLevel(f"sigma{s:g}", GaussianNoise(float(s)) if s > 0 else None) for s in sigmas]
-    return levels + [NoiseLevel(spec, noise_from_spec(spec)) for spec in specs]
+def noise_levels(sigmas: list[float], specs: list[str], motion: MotionRange = MotionRange()) -> list[NoiseLevel]:
+    suffix = f"+{motion.label}" if motion.label else ""
+    levels = [NoiseLevel(f"sigma{s:g}{suffix}", GaussianNoise(float(s)) if s > 0 else None, motion) for s in sigmas]
+    return levels + [NoiseLevel(spec + suffix, noise_from_spec(spec), motion) for spec in specs]
 
 
 def protocol_burst(image: np.ndarray, sequence: str, index: int, level: NoiseLevel, frames: int = 5,
-                   max_shift: float = 3.0) -> tuple[np.ndarray, tuple[float, float]]:
-    """The benchmark's burst of ``image`` and its per-frame motion (see the module docstring)."""
+                   max_shift: float = 3.0) -> tuple[np.ndarray, BurstMotion]:
+    """The benchmark's burst of ``image`` and its in-burst motion (see the module docstring)."""
     rng = np.random.default_rng(stable_seed(sequence, index, level.label))
-    motion = random_motion(rng, max_shift)
+    m = level.motion
+    if m.label:
+        motion = sample_motion(rng, max_shift, m.rotation_deg, m.zoom, m.flow_px)
+    else:
+        motion = BurstMotion(random_motion(rng, max_shift))
     return simulate_burst(image, frames, motion, level.model, rng), motion
+
+
+def oracle_merge(burst: np.ndarray, motion: BurstMotion) -> np.ndarray:
+    """The burst's frames resampled onto the common frame with the true motion and
+    averaged where they cover it (float32 on the burst's scale)."""
+    n, h, w = burst.shape[:3]
+    total = np.zeros((h, w, 3), np.float32)
+    count = np.zeros((h, w, 1), np.float32)
+    for i, k in enumerate(range(-(n // 2), n // 2 + 1)):
+        p = motion.frame_points(k, (w, h))
+        total += cv2.remap(burst[i].astype(np.float32), p[..., 0], p[..., 1], cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)
+        count += ((p[..., 0] >= 0) & (p[..., 0] <= w - 1) & (p[..., 1] >= 0) & (p[..., 1] <= h - 1))[..., None]
+    return total / np.maximum(count, 1)
 
 
 class MethodRunner:
@@ -85,14 +126,17 @@ class MethodRunner:
         self.extractor = create(inner, **({"top_k": str(top_k)} if kind in LEARNED else {}))
         self.key = prefix + results_key(inner)  # names the feature cache
 
-    def __call__(self, image: np.ndarray, burst: np.ndarray, motion: tuple[float, float]) -> Features:
+    def __call__(self, image: np.ndarray, burst: np.ndarray, motion: BurstMotion) -> Features:
         if self.mode == "gold":
             return self.extractor(image[None])
         if self.mode == "oracle":
             from lburst.methods.merge import merge_burst
 
-            k = np.arange(len(burst)) - len(burst) // 2
-            merged = merge_burst(burst, shifts=k[:, None] * np.asarray(motion)[None])
+            if motion.is_translation:
+                k = np.arange(len(burst)) - len(burst) // 2
+                merged = merge_burst(burst, shifts=k[:, None] * np.asarray(motion.shift)[None])
+            else:
+                merged = oracle_merge(burst, motion)
             return self.extractor(np.clip(np.round(merged), 0, 255).astype(np.uint8)[None])
         return self.extractor(burst)
 
@@ -155,14 +199,15 @@ def summarize(per_pair: dict[str, list[dict]], seconds: dict[str, float], kinds:
 
 def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[float], out: str | Path,
                              noise_specs: list[str] = (), max_side: int | None = None, top_k: int = 5000,
-                             progress: bool = True) -> dict:
+                             progress: bool = True, motion: MotionRange = MotionRange()) -> dict:
     """Run the protocol; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``."""
     out = Path(out)
     folders = list_sequences(data)
-    levels = noise_levels(list(sigmas), list(noise_specs))
+    levels = noise_levels(list(sigmas), list(noise_specs), motion)
     runners = {spec: MethodRunner(spec, top_k) for spec in methods}
     results: dict = {"protocol": {"data": str(data), "sigmas": list(sigmas), "noise_specs": list(noise_specs),
-                                  "max_side": max_side, "top_k": top_k, "thresholds": list(THRESHOLDS)},
+                                  "max_side": max_side, "top_k": top_k, "thresholds": list(THRESHOLDS),
+                                  "burst_motion": asdict(motion)},
                      "methods": {}}
     bar = tqdm(total=len(levels) * len(folders) * len(methods) * 6, desc="homography bench", disable=not progress)
     sequences = {f.name: read_sequence(f, max_side) for f in folders}
@@ -253,12 +298,18 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-side", type=int)
     p.add_argument("--top-k", type=int, default=5000)
     p.add_argument("--out", type=Path, default=Path("outputs/homography"))
+    p.add_argument("--burst-rotation", type=float, default=0.0, metavar="DEG",
+                   help="largest in-burst rotation per frame (degrees; 0: translation only)")
+    p.add_argument("--burst-zoom", type=float, default=0.0, metavar="Z", help="largest in-burst zoom per frame (0.01: 1%%)")
+    p.add_argument("--burst-flow", type=float, default=0.0, metavar="PX",
+                   help="largest std of the smooth non-uniform in-burst flow per frame (pixels)")
 
 
 def main(args: argparse.Namespace) -> int:
     try:
+        motion = MotionRange(args.burst_rotation, args.burst_zoom, args.burst_flow)
         results = run_homography_benchmark(args.data, args.methods, args.sigma, args.out, args.noise,
-                                           args.max_side, args.top_k)
+                                           args.max_side, args.top_k, motion=motion)
     except (FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
