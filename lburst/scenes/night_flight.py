@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lburst.io import atomic_path
+from lburst.io import atomic_path, write_image
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
 from lburst.scenes.raycast import cast, intrinsics, rays_through
 from lburst.scenes.reference import Reference

@@ -31,7 +31,7 @@ import numpy as np
 from tqdm import tqdm
 
 from lburst.features import Features, check_features
-from lburst.io import atomic_path
+from lburst.io import atomic_path, write_image
 from lburst.match import mutual_nearest_neighbours
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, SceneItem, exif_source, list_scene, load_item, reference_cameras
