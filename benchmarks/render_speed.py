@@ -1,4 +1,4 @@
-"""Rendering speed of the synthetic night flight on this machine.
+"""Rendering speed of the synthetic night flight on the machine that runs it.
 
 For each image size (and supersampling factor) it times: building the city (textures and
 boxes), one frame (ray casting and shading, median of ``--repeats``), and the whole scene

@@ -1,4 +1,4 @@
-"""Training speed: steps and pairs per second of the LBurst training step on this machine.
+"""Training speed: steps and pairs per second of the LBurst training step on the machine that runs it.
 
 Times the full step (pair generation excluded: it runs in loader workers, see
 ``pair_s``), forward + three losses + backward + Adam, on random photos' pairs.
