@@ -137,14 +137,20 @@ class LowLightNoise:
         variance = (electrons + self.read_noise_e**2 + self.gain_e_per_adu**2 / 12.0) * scale**2
         return image, variance
 
-    def __call__(self, image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def raw_counts(self, image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The converter's digital numbers above the black level (float32, read noise can make
+        them negative; at most ``2**adc_bits - 1``) for a 0..255 image: what a RAW file stores,
+        before the black level is added."""
         linear = np.asarray(image, np.float32) / 255.0
         if self.gamma != 1.0:
             linear = np.clip(linear, 0, 1) ** self.gamma
         electrons = rng.poisson(np.clip(linear, 0, None) * self._electrons_per_unit()).astype(np.float32)
         electrons += rng.standard_normal(electrons.shape, dtype=np.float32) * self.read_noise_e
         electrons = np.minimum(electrons, self.full_well_e)
-        adu = np.minimum(np.round(electrons / self.gain_e_per_adu), 2**self.adc_bits - 1)
+        return np.minimum(np.round(electrons / self.gain_e_per_adu), 2**self.adc_bits - 1)
+
+    def __call__(self, image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        adu = self.raw_counts(image, rng)
         out = adu * (self.gain_e_per_adu / self._electrons_per_unit())
         if self.gamma != 1.0:
             out = np.clip(out, 0, None) ** (1.0 / self.gamma)

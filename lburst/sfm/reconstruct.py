@@ -35,6 +35,7 @@ from lburst.io import atomic_path, write_image
 from lburst.match import mutual_nearest_neighbours
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, SceneItem, exif_source, list_scene, load_item, reference_cameras
+from lburst.sources import is_recording
 
 AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto': exhaustive up to this many images, else sequential
 RESULT_FILE = "result.json"
@@ -57,6 +58,10 @@ class ReconstructOptions:
         num_threads, seed: for COLMAP (repeatable for one thread count).
         progress: tqdm bars.
         extra: further :class:`lburst.sfm.colmap.ColmapOptions` fields, e.g. ``max_num_trials``.
+        retrieval: with sequential pairs, also each image's this many most similar images
+            farther apart (loop-closure candidates, :mod:`lburst.sfm.retrieval`).
+        recording: :class:`lburst.sources.RecordingOptions` for a scene that is a
+            recording (video or frame folder); ``None``: the defaults.
     """
 
     pairs: str = "auto"
@@ -71,6 +76,8 @@ class ReconstructOptions:
     seed: int = 0
     progress: bool = True
     extra: dict = field(default_factory=dict)
+    retrieval: int = 0
+    recording: Any = None
 
 
 @dataclass
@@ -86,6 +93,8 @@ class ReconstructionResult:
         metrics: the table's columns (:mod:`lburst.sfm.metrics`), reference ones included
             when the scene has a reference.
         error: why COLMAP failed, or ``None``.
+        source_error: for a recording, why reading it stopped early (the keyframes read
+            before it were reconstructed), or ``None``.
     """
 
     scene: str
@@ -97,6 +106,7 @@ class ReconstructionResult:
     cameras: dict[str, dict] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+    source_error: str | None = None
 
     @property
     def converged(self) -> bool:
@@ -202,6 +212,51 @@ def scene_features(scene: Scene, spec: str, out: Path, progress: bool = True,
     return features, shapes
 
 
+def recording_features(path: str | Path, spec: str, out: Path, opts: ReconstructOptions, extractor=None
+                       ) -> tuple[Scene, list[Features], list[tuple[int, int]], str | None]:
+    """The keyframe scene of a recording (:mod:`lburst.sfm.recording`), the features and image
+    size (H, W) of each keyframe, and why reading stopped early (or ``None``).  Features are
+    cached as for bursts, keyed on the spec, the recording's content and its options."""
+    from lburst.io import BurstError
+    from lburst.sfm import recording as rec
+    from lburst.sources import RecordingOptions, open_recording
+
+    try:
+        recording = open_recording(path, opts.recording or RecordingOptions())
+    except BurstError as err:
+        raise ReconstructionError(str(err)) from err
+    key = f"{spec}|{rec.cache_key(recording)}"
+    paths = lambda name: (out / "features" / f"{_safe_name(name)}.npz", out / "images" / f"{name}.png")  # noqa: E731
+    cached = lambda name: load_features(paths(name)[0], key) is not None and paths(name)[1].is_file()  # noqa: E731
+    keyframes = rec.load_keyframes(out, key)
+    error = None
+    if keyframes is None or not all(cached(k.name) for k in keyframes):
+        keyframes = []
+        stream = rec.stream_keyframes(recording, cached, keyframes)
+        try:
+            for keyframe, burst in tqdm(stream, desc=f"keyframes {spec}", disable=not opts.progress, leave=False):
+                if burst is None:
+                    continue
+                cache, image_path = paths(keyframe.name)
+                common = burst[len(burst) // 2]
+                with atomic_path(image_path) as tmp:
+                    write_image(tmp, to_uint8(common))
+                if extractor is None:
+                    from lburst.methods import create
+
+                    extractor = create(spec)
+                save_features(cache, check_features(extractor(burst)), key, common.shape[:2])
+        except BurstError as err:
+            error = str(err)
+        rec.save_keyframes(out, key, recording, keyframes, error)
+    features, shapes = [], []
+    for keyframe in keyframes:
+        feats, shape = load_features(paths(keyframe.name)[0], key)
+        features.append(feats)
+        shapes.append(shape)
+    return rec.keyframe_scene(recording, keyframes, out), features, shapes, error
+
+
 def scene_cameras(scene: Scene, shapes: list[tuple[int, int]], options: ReconstructOptions) -> tuple[list[dict], list[int]]:
     """COLMAP camera priors (distinct dicts) and the camera index of every image (module docstring)."""
     from lburst.sfm.colmap import default_camera, exif_camera
@@ -220,6 +275,8 @@ def scene_cameras(scene: Scene, shapes: list[tuple[int, int]], options: Reconstr
             if item.name not in ref_cams:
                 raise ReconstructionError(f"{scene.reference_path}: no camera for image {item.name!r}")
             camera = {**ref_cams[item.name], "prior_focal": True}
+        elif options.camera == "auto" and scene.camera is not None:
+            camera = {**scene.camera, "prior_focal": True}
         elif options.camera == "auto" and exif_source(item) is not None:
             camera = exif_camera(exif_source(item), options.camera_model)
         priors.append(camera or default_camera(w, h, options.camera_model))
@@ -250,25 +307,41 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
     out = Path(out_dir)
     if not _utf8(str(out.resolve())):
         raise ReconstructionError(f"{out!s}: the output path is not valid UTF-8, which COLMAP cannot use")
+    source_error = None
     try:
-        scene = list_scene(scene_dir)
+        if is_recording(scene_dir):
+            scene, features, shapes, source_error = recording_features(scene_dir, method_spec, out, opts, extractor)
+            if source_error and len(scene.items) < 2:
+                raise ReconstructionError(source_error)
+        else:
+            scene = list_scene(scene_dir)
         if len(scene.items) < 2:
             raise ReconstructionError(f"{scene_dir}: a reconstruction needs at least 2 images, found {len(scene.items)}")
-        features, shapes = scene_features(scene, method_spec, out, opts.progress, extractor)
+        if not is_recording(scene_dir):
+            features, shapes = scene_features(scene, method_spec, out, opts.progress, extractor)
         cameras, camera_of_image = scene_cameras(scene, shapes, opts)
     except SceneError as err:
         raise ReconstructionError(str(err)) from err
     n = len(scene.items)
     mode = opts.pairs if opts.pairs != "auto" else ("exhaustive" if n <= AUTO_EXHAUSTIVE_MAX else "sequential")
     pairs = make_pairs(n, mode, opts.overlap)
+    if opts.retrieval and mode == "sequential":
+        from lburst.sfm.retrieval import retrieval_pairs, vlad
+
+        loops = retrieval_pairs(vlad([f["descriptors"] for f in features], seed=opts.seed), opts.retrieval, opts.overlap)
+        pairs = sorted(set(pairs) | set(loops))
     matches = match_pairs(features, pairs, opts.progress)
+    # a recording's meta.json camera is its calibration: one camera, held fixed
+    calibrated = scene.camera is not None and opts.camera == "auto"
+    if calibrated and all(cam == cameras[0] for cam in cameras):
+        cameras, camera_of_image = cameras[:1], [0] * n
+    fixed = opts.fix_intrinsics or calibrated
     colmap_options = ColmapOptions(mapper=opts.mapper, num_threads=opts.num_threads, seed=opts.seed,
-                                   refine_focal_length=not opts.fix_intrinsics,
-                                   refine_extra_params=not opts.fix_intrinsics, **opts.extra)
+                                   refine_focal_length=not fixed, refine_extra_params=not fixed, **opts.extra)
     job = ColmapJob(scene.names, str((out / "images").resolve()), cameras, camera_of_image, colmap_options)
     job_dir = out / "colmap"
     job_dir.mkdir(parents=True, exist_ok=True)
-    result = ReconstructionResult(str(scene.root), method_spec, str(out), scene.names)
+    result = ReconstructionResult(str(scene.root), method_spec, str(out), scene.names, source_error=source_error)
     summary: dict = {"converged": False, "registered": {}, "num_points3D": 0}
     for attempt in range(2):
         job.save(job_dir / "job.json")
@@ -299,11 +372,16 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
     if scene.reference_path is not None and not result.error:
         result.metrics.update(evaluate_against_reference(result, scene.reference_path))
     result.save()
+    if is_recording(scene_dir):
+        from lburst.sfm.outputs import write_recording_outputs
+
+        write_recording_outputs(result, features, shapes, pairs, matches)
     return result
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", help="scene folder: one sub-folder of frames per burst, or single images")
+    parser.add_argument("scene", help="scene folder (one sub-folder of frames per burst, or single images), "
+                                      "or a recording: a video, or a folder of DNG frames")
     parser.add_argument("--method", default="lburst", help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...)")
     parser.add_argument("--out", required=True, help="output folder (features cache, COLMAP files, result.json)")
     parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto",
@@ -320,15 +398,26 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--retrieval", type=int,
+                        help="sequential pairs: also match each image with its N most similar images farther apart "
+                             "(loop closure; default 5 for a recording, 0 for a scene)")
+    from lburst.sources import add_recording_arguments
+
+    add_recording_arguments(parser)
 
 
 def main(args: argparse.Namespace) -> int:
+    from lburst.sources import recording_options
+
     try:
         result = reconstruct_scene(args.scene, args.method, args.out, pairs=args.pairs, overlap=args.overlap,
                                    fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
                                    camera=args.camera, camera_model=args.camera_model,
                                    single_camera=args.single_camera, fix_intrinsics=args.fix_intrinsics,
-                                   num_threads=args.threads, seed=args.seed)
+                                   num_threads=args.threads, seed=args.seed,
+                                   retrieval=args.retrieval if args.retrieval is not None else
+                                   (5 if is_recording(args.scene) else 0),
+                                   recording=recording_options(args))
     except (ReconstructionError, ValueError) as err:
         print(f"lburst reconstruct: {err}", file=sys.stderr)
         return 1
@@ -342,4 +431,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"lburst reconstruct: no model: COLMAP registered no images of {args.scene}", file=sys.stderr)
         return 1
     print(f"{len(result.registered)}/{len(result.names)} images registered; model in {Path(args.out) / 'colmap'}")
+    if result.source_error:
+        print(f"lburst reconstruct: {result.source_error} (the {len(result.names)} keyframes before it were used)",
+              file=sys.stderr)
+        return 1
     return 0

@@ -41,11 +41,13 @@ class SceneItem:
 
 @dataclass(frozen=True)
 class Scene:
-    """The items of a scene in trajectory order and its optional reference file."""
+    """The items of a scene in trajectory order, its optional reference file, and the camera
+    of a recording's ``meta.json`` (a COLMAP camera dict used as the intrinsics prior), if any."""
 
     root: Path
     items: tuple[SceneItem, ...]
     reference_path: Path | None
+    camera: dict | None = None
 
     @property
     def names(self) -> list[str]:

@@ -1,0 +1,110 @@
+"""RAW and 16-bit linear frames: reading DNG, and the brightness normalisation of dark recordings.
+
+**Reading** (:func:`read_dng`): LibRaw (``rawpy``) subtracts the DNG's black level per
+channel, scales by its white level (``value = (raw - black) / (white - black)``; LibRaw's
+automatic maximum adjustment and auto-brightening are off), applies the as-shot white
+balance and the DNG colour matrix, and demosaics (AHD).  The result is **linear** RGB
+``(H, W, 3)`` uint16, 0..65535 for black..white.
+
+**Normalisation** (:class:`Normalisation`): the networks were trained on 8-bit sRGB
+photos, so a linear 16-bit frame is turned into what they saw:
+
+1. ``x = linear / 65535`` (0..1, linear);
+2. ``y = min(gain * x, 1)`` with one ``gain`` for the whole recording:
+   ``gain = target / P`` where ``P`` is the ``percentile``-th percentile of the
+   luminance (Rec. 709 weights) of the frames of the first burst, clamped to
+   ``[1, max_gain]``; fixed for the recording, so every burst (and a resumed run)
+   gets the same brightness;
+3. the sRGB transfer curve (IEC 61966-2-1), then rounding to uint8.
+
+This is what the feature methods and COLMAP's images get.  8-bit frames (video,
+8-bit PNG/JPEG) are already display-referred and pass unchanged.  ``gain='none'``
+keeps the linear uint16 frames as they are (the extractors scale uint16 by
+1/65535), which is what a dark RAW frame looks like without normalisation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lburst.io import BurstError
+
+RAW_SUFFIXES = (".dng",)
+LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
+
+
+def read_dng(path: str | Path) -> np.ndarray:
+    """A DNG file as linear RGB ``(H, W, 3)`` uint16 (module docstring); ``BurstError`` naming the file."""
+    import rawpy
+
+    path = Path(path)
+    if not path.is_file():
+        raise BurstError(f"{path}: no such file")
+    try:
+        with rawpy.imread(str(path)) as raw:
+            if raw.raw_type != rawpy.RawType.Flat or raw.raw_pattern is None or raw.num_colors < 3:
+                raise BurstError(f"{path}: not a Bayer (CFA) raw image: no CFA pattern tags")
+            return raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True,
+                                   adjust_maximum_thr=0.0, user_flip=0,
+                                   demosaic_algorithm=rawpy.DemosaicAlgorithm.AHD)
+    except BurstError:
+        raise
+    except (rawpy.LibRawError, OSError, ValueError) as err:
+        raise BurstError(f"{path}: not a readable DNG ({type(err).__name__}: {err})") from err
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """The sRGB transfer curve of linear values in [0, 1] (float32 in, float32 out)."""
+    linear = np.clip(linear, 0.0, 1.0)
+    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(linear, 1 / 2.4) - 0.055).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class Normalisation:
+    """Brightness normalisation of linear 16-bit frames (module docstring).
+
+    Attributes:
+        gain: ``'auto'`` (from the percentile of the first burst), ``'none'`` (keep linear
+            uint16) or a number (a fixed gain).
+        percentile: which luminance percentile is mapped to ``target``.
+        target: the linear value (0..1) the percentile is mapped to.
+        max_gain: largest automatic gain.
+    """
+
+    gain: str | float = "auto"
+    percentile: float = 99.5
+    target: float = 0.8
+    max_gain: float = 4096.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.gain, str) and self.gain not in ("auto", "none"):
+            try:
+                object.__setattr__(self, "gain", float(self.gain))
+            except ValueError:
+                raise ValueError(f"gain must be 'auto', 'none' or a number, got {self.gain!r}") from None
+        if not isinstance(self.gain, str) and not self.gain > 0:
+            raise ValueError(f"gain must be positive, got {self.gain}")
+        if not 0 < self.percentile <= 100 or not 0 < self.target <= 1 or self.max_gain < 1:
+            raise ValueError("need 0 < percentile <= 100, 0 < target <= 1 and max_gain >= 1")
+
+    def estimate_gain(self, frames: np.ndarray) -> float | None:
+        """The recording's gain from linear uint16 frames ``(..., 3)``; ``None`` for ``gain='none'``."""
+        if self.gain == "none":
+            return None
+        if not isinstance(self.gain, str):
+            return float(self.gain)
+        luma = (np.asarray(frames, np.float32) / 65535.0) @ LUMA
+        level = float(np.percentile(luma, self.percentile))
+        return float(np.clip(self.target / max(level, 1e-12), 1.0, self.max_gain))
+
+
+def normalise(frames: np.ndarray, gain: float | None) -> np.ndarray:
+    """Linear uint16 frames ``(..., 3)`` to sRGB uint8 with ``gain`` (module docstring); unchanged for ``None``
+    or for frames that are already uint8."""
+    if gain is None or frames.dtype == np.uint8:
+        return frames
+    linear = np.asarray(frames, np.float32) * np.float32(gain / 65535.0)
+    return np.rint(srgb_encode(linear) * 255.0).astype(np.uint8)

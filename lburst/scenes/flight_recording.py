@@ -1,0 +1,149 @@
+"""The night flight as a continuous recording: an MP4 video or a DNG frame sequence, with
+ground-truth poses of every frame.
+
+The drone flies the trajectory of :mod:`lburst.scenes.night_flight` (``(n_bursts - 1) *
+burst_spacing`` metres) and the camera records a frame every ``frame_interval`` seconds:
+frame ``j`` is rendered from the pose at time ``j / fps`` (``fps = 1 / frame_interval``),
+so the bursts of the scene version are the frames around ``j = i * burst_spacing /
+(speed * frame_interval)``.  Ground truth is written per frame in TUM format
+(:mod:`lburst.tum`) with the frame's timestamp, and the camera (PINHOLE, exact) and frame
+rate in the recording's ``meta.json`` (see :mod:`lburst.sources` for where they go).
+
+- **Video** (:func:`write_flight_video`): each frame as in the scene version (scaled by
+  ``exposure``, noise ``cfg.noise`` on the 0..255 scale, rounded to 8 bits), encoded
+  with H.264 (``crf``), ``yuv420p``, ``faststart``.
+- **DNG** (:func:`write_flight_dng`): the rendered radiance (0..255 taken as linear,
+  white at 255, times ``exposure``) is sampled through an RGGB Bayer filter and converted
+  by the sensor of ``cfg.noise`` (``lowlight:...``, :class:`lburst.noise.LowLightNoise`:
+  shot noise, read noise, a 12-bit ADC) to raw counts above a black level of
+  ``black_level``; one DNG per frame, ``frame_000000.dng ...``, white level
+  ``2**adc_bits - 1``.  These frames are very dark: at ``lowlight:moonless`` white is
+  about 6 counts above black.
+
+Frame noise is seeded by ``(cfg.seed, 2, j)`` (video) and ``(cfg.seed, 3, j)`` (DNG).
+"""
+
+from __future__ import annotations
+
+import json
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from lburst.io import atomic_path
+from lburst.scenes.night_flight import NightFlightConfig, camera_pose, make_city, render_view
+from lburst.scenes.raycast import intrinsics
+from lburst.sources import ground_truth_path, meta_path
+from lburst.tum import write_tum
+
+BLACK_LEVEL = 256
+
+
+def frame_count(cfg: NightFlightConfig) -> int:
+    """Frames of the continuous flight: from time 0 to the last burst's centre."""
+    duration = (cfg.n_bursts - 1) * cfg.burst_spacing / cfg.speed
+    return int(round(duration / cfg.frame_interval)) + 1
+
+
+def fps(cfg: NightFlightConfig) -> float:
+    return 1.0 / cfg.frame_interval
+
+
+def frame_times(cfg: NightFlightConfig) -> np.ndarray:
+    return np.arange(frame_count(cfg)) / fps(cfg)
+
+
+def camera(cfg: NightFlightConfig) -> dict:
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    return {"model": "PINHOLE", "width": cfg.width, "height": cfg.height,
+            "params": [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])]}
+
+
+def write_sidecars(cfg: NightFlightConfig, recording: Path, kind: str) -> None:
+    """``meta.json`` (fps, camera, configuration) and ``gt.txt`` (per-frame TUM poses) of a recording."""
+    times = frame_times(cfg)
+    write_tum(ground_truth_path(recording), times, [camera_pose(cfg, t) for t in times],
+              header=f"ground truth of the synthetic night flight ({kind}), camera-to-world, metres")
+    meta = {"fps": fps(cfg), "camera": camera(cfg), "kind": kind, "frames": len(times), "night_flight": cfg.to_dict()}
+    with atomic_path(meta_path(recording)) as tmp:
+        tmp.write_text(json.dumps(meta, indent=1))
+
+
+def _rendered(cfg: NightFlightConfig, progress: bool, desc: str, indices=None):
+    """(index, time, radiance (H, W, 3) float32 0..255 scaled by exposure) of frames ``indices`` (default all)."""
+    city = make_city(cfg)
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    indices = range(frame_count(cfg)) if indices is None else indices
+    if progress:
+        from tqdm import tqdm
+
+        indices = tqdm(indices, desc=desc, unit="frame")
+    for j in indices:
+        time = j / fps(cfg)
+        R, t = camera_pose(cfg, time)
+        image, _ = render_view(city, K, R, t, cfg.width, cfg.height, cfg.supersample)
+        yield j, time, image * np.float32(cfg.exposure)
+
+
+def write_flight_video(path: str | Path, cfg: NightFlightConfig, crf: int = 16, progress: bool = True) -> Path:
+    """Render the flight as an MP4 (module docstring), atomically; sidecars next to it."""
+    import av
+
+    from lburst.noise import noise_from_spec
+
+    path = Path(path)
+    if cfg.width % 2 or cfg.height % 2:
+        raise ValueError(f"an H.264 video needs an even size, got {cfg.width}x{cfg.height}")
+    noise = noise_from_spec(cfg.noise)
+    rate = Fraction(fps(cfg)).limit_denominator(1000)
+    with atomic_path(path) as tmp:
+        with av.open(str(tmp), mode="w", format="mp4", options={"movflags": "+faststart"}) as container:
+            stream = container.add_stream("libx264", rate=rate)
+            stream.width, stream.height, stream.pix_fmt = cfg.width, cfg.height, "yuv420p"
+            stream.options = {"crf": str(crf), "preset": "medium"}
+            for j, _, image in _rendered(cfg, progress, f"video {path.name}"):
+                noisy = noise(image, np.random.default_rng([cfg.seed, 2, j]))
+                frame = av.VideoFrame.from_ndarray(np.clip(np.round(noisy), 0, 255).astype(np.uint8), format="rgb24")
+                frame.pts = j
+                for packet in stream.encode(frame):
+                    container.mux(packet)
+            for packet in stream.encode(None):
+                container.mux(packet)
+    write_sidecars(cfg, path, "video")
+    return path
+
+
+def raw_frame(cfg: NightFlightConfig, radiance: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, int]:
+    """Bayer raw counts ``(H, W)`` uint16 (black level included) of a radiance image, and the white level."""
+    from lburst.noise import LowLightNoise, noise_from_spec
+    from lburst.scenes.dng import mosaic
+
+    sensor = noise_from_spec(cfg.noise)
+    if not isinstance(sensor, LowLightNoise):
+        raise ValueError(f"a DNG recording needs a sensor noise model (lowlight:...), got {cfg.noise!r}")
+    white = 2**sensor.adc_bits - 1
+    counts = sensor.raw_counts(mosaic(radiance), rng) + BLACK_LEVEL
+    return np.clip(counts, 0, white).astype(np.uint16), white
+
+
+def write_flight_dng(folder: str | Path, cfg: NightFlightConfig, progress: bool = True) -> Path:
+    """Render the flight as DNG frames in ``folder`` (module docstring); frames already there are kept
+    (resume), a folder made with another configuration is refused with ``ValueError``."""
+    from lburst.scenes.dng import write_dng
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    meta = meta_path(folder)
+    if meta.is_file():
+        old = json.loads(meta.read_text()).get("night_flight")
+        if old != json.loads(json.dumps(cfg.to_dict())):
+            raise ValueError(f"{meta}: {folder} was made with another configuration; use a new folder")
+    write_sidecars(cfg, folder, "dng")
+    todo = [j for j in range(frame_count(cfg)) if not (folder / f"frame_{j:06d}.dng").is_file()]
+    if todo:
+        for j, _, radiance in _rendered(cfg, progress, f"DNG {folder.name}", todo):
+            cfa, white = raw_frame(cfg, radiance, np.random.default_rng([cfg.seed, 3, j]))
+            write_dng(folder / f"frame_{j:06d}.dng", cfa, BLACK_LEVEL, white)
+    return folder
+

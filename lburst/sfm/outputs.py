@@ -1,0 +1,155 @@
+"""What a reconstruction of a recording leaves for other tools, beside COLMAP's model and PLY.
+
+In the output folder ``OUT``:
+
+- ``trajectory.tum``: the registered keyframes' camera-to-world poses in the model's
+  frame, timestamped with the keyframes' times (:mod:`lburst.tum`), so that
+  ``evo_ape tum <recording>.gt.txt OUT/trajectory.tum -as`` compares it with the
+  ground truth;
+- ``features.h5``, ``matches.h5``, ``pairs.txt``: hloc's layout, images named as in
+  ``OUT/images`` (``<keyframe>.png``): per image ``keypoints`` (K, 2) (pixel centres at
+  integers, as hloc), ``descriptors`` (D, K), ``scores``, ``image_size``; per pair
+  ``matches.h5[name0][name1]`` with ``matches0`` (K0,) int32 (index into image 1's
+  keypoints, -1: unmatched) and ``matching_scores0`` (1 for a mutual nearest neighbour);
+- ``report.md`` with ``trajectory.png`` (top-down, Sim3-aligned to the ground truth
+  when there is one) and ``registration.png`` (3D points per keyframe; grey: not
+  registered), and a table of every keyframe.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from lburst.io import atomic_path, write_features_h5
+from lburst.tum import write_tum
+
+if TYPE_CHECKING:
+    from lburst.sfm.reconstruct import ReconstructionResult
+
+
+def keyframe_times(out: Path) -> dict[str, float]:
+    data = json.loads((out / "keyframes.json").read_text())
+    return {k["name"]: float(k["time"]) for k in data["keyframes"]}
+
+
+def write_trajectory(result: "ReconstructionResult", times: dict[str, float], path: Path) -> Path:
+    names = [n for n in result.registered if n in times]
+    return write_tum(path, [times[n] for n in names], [result.poses[n] for n in names],
+                     header=f"lburst reconstruct {result.scene} ({result.method}): keyframes, model frame")
+
+
+def write_hloc(out: Path, names: list[str], features: list[dict], shapes: list[tuple[int, int]],
+               pairs: list[tuple[int, int]], matches: list[np.ndarray]) -> None:
+    """hloc's ``features.h5``, ``matches.h5`` and ``pairs.txt`` (module docstring), each written atomically."""
+    import h5py
+
+    files = [f"{n}.png" for n in names]
+    with atomic_path(out / "features.h5") as tmp:
+        tmp.unlink()  # h5py appends to an existing file; start from none
+        for file, feats, (h, w) in zip(files, features, shapes):
+            write_features_h5(tmp, file, feats, (w, h))
+    with atomic_path(out / "matches.h5") as tmp, h5py.File(tmp, "w") as f:
+        for (a, b), m in zip(pairs, matches):
+            m0 = np.full(len(features[a]["keypoints"]), -1, np.int32)
+            m0[m[:, 0]] = m[:, 1]
+            group = f.require_group(files[a]).create_group(files[b])
+            group.create_dataset("matches0", data=m0)
+            group.create_dataset("matching_scores0", data=(m0 >= 0).astype(np.float16))
+    with atomic_path(out / "pairs.txt") as tmp:
+        tmp.write_text("".join(f"{files[a]} {files[b]}\n" for a, b in pairs))
+
+
+def _plot_trajectory(result: "ReconstructionResult", path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lburst.scenes.reference import Reference
+    from lburst.sfm.poses import umeyama
+
+    est = {n: -np.asarray(R).T @ np.asarray(t) for n, (R, t) in result.poses.items()}
+    ref_path = Path(result.out_dir) / "reference.json"
+    fig, ax = plt.subplots(figsize=(7, 6))
+    names = [n for n in result.names if n in est]
+    points = np.array([est[n] for n in names]).reshape(-1, 3)
+    if ref_path.is_file():
+        centres = Reference.load(ref_path).centers()
+        ref = np.array([centres[n] for n in result.names if n in centres])
+        ax.plot(ref[:, 0], ref[:, 1], "k-", lw=1, label="ground truth")
+        common = [n for n in names if n in centres]
+        if len(common) >= 3:
+            points = umeyama(np.array([est[n] for n in common]), np.array([centres[n] for n in common])).apply(points)
+    ax.plot(points[:, 0], points[:, 1], "o", ms=4, mfc="none", c="tab:blue",
+            label=f"{result.method}: {len(names)}/{len(result.names)} keyframes")
+    if len(points):
+        ax.plot(points[:1, 0], points[:1, 1], "g^", ms=9, label="first keyframe")
+    ax.set_aspect("equal")
+    ax.set_title("camera positions, top-down" + (" (Sim3-aligned)" if ref_path.is_file() else " (model frame)"))
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def _plot_registration(names: list[str], points: dict[str, int], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 3))
+    x = np.arange(len(names))
+    heights = [points.get(n, 0) for n in names]
+    colours = ["tab:blue" if n in points else "lightgrey" for n in names]
+    ax.bar(x, [h if n in points else max(heights + [1]) for n, h in zip(names, heights)], color=colours)
+    ax.set_xlabel("keyframe")
+    ax.set_ylabel("3D points seen")
+    ax.set_title(f"registration: {len(points)}/{len(names)} keyframes (grey: not registered)")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def write_report(result: "ReconstructionResult", times: dict[str, float], path: Path) -> None:
+    from lburst.sfm.metrics import markdown_table
+
+    out = Path(result.out_dir)
+    summary_path = out / "colmap" / "output.json"
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    points = {n: int(v.get("num_points3D", 0)) for n, v in summary.get("registered", {}).items()}
+    _plot_trajectory(result, out / "trajectory.png")
+    _plot_registration(result.names, points, out / "registration.png")
+    m = result.metrics
+    lines = [f"# Reconstruction of {Path(result.scene).name}", "",
+             f"Method `{result.method}`; {len(result.registered)}/{len(result.names)} keyframes registered."]
+    if "ate_rmse" in m:
+        lines.append(f"ATE {m['ate_rmse']:.4f} m RMSE ({m.get('ate_percent', float('nan')):.3f} % of the path) "
+                     "after a Sim3 alignment to the ground truth.")
+    if result.source_error:
+        lines.append(f"Reading the recording stopped early: {result.source_error}")
+    if result.error:
+        lines.append(f"COLMAP failed: {result.error}")
+    lines += ["", markdown_table([{"method": result.method, "scene": Path(result.scene).name, **m}]), "",
+              "![trajectory](trajectory.png)", "", "![registration](registration.png)", "",
+              "| keyframe | time (s) | registered | 3D points |", "|---|---|---|---|"]
+    lines += [f"| {n} | {times.get(n, float('nan')):.3f} | {'yes' if n in points else 'no'} | {points.get(n, 0)} |"
+              for n in result.names]
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+
+
+def write_recording_outputs(result: "ReconstructionResult", features: list[dict], shapes: list[tuple[int, int]],
+                            pairs: list[tuple[int, int]], matches: list[np.ndarray]) -> None:
+    """``trajectory.tum``, hloc's files and the report of a recording's reconstruction (module docstring)."""
+    out = Path(result.out_dir)
+    times = keyframe_times(out)
+    write_trajectory(result, times, out / "trajectory.tum")
+    write_hloc(out, result.names, features, shapes, pairs, matches)
+    write_report(result, times, out / "report.md")

@@ -1,0 +1,328 @@
+"""Recordings as burst sources: a video or a folder of consecutive frames, cut into keyframe bursts.
+
+A *recording* is a video file (decoded with PyAV, one frame at a time) or a folder of
+consecutive frames (PNG/JPEG/TIFF, 8 or 16 bit, or DNG), sorted naturally.  Frame
+*indices* count frames from the start: for a video ``round((time - t0) * fps)`` from
+the frames' timestamps, for a folder the last number in each file name (so a gap in the
+numbering is a dropped frame), or the position when the names carry no distinct
+numbers.  Timestamps are the video's, or ``index / fps`` for a folder.
+
+Keyframes are frames ``start, start + every, start + 2 every, ...``; the burst of
+keyframe ``k`` is frames ``k - N//2 .. k + N//2`` (``N = burst``, odd), in temporal
+order, keyframe in the middle.  A frame of the window the recording lacks (before its
+first frame, after its last, or dropped) is replaced by the nearest frame of the window
+it has (:attr:`Keyframe.filled` counts them); a keyframe whose own frame is missing is
+skipped.  Frames are read as a stream and only those of the bursts being assembled are
+held, at most ``N + 1`` at once, so a long recording never sits in memory.
+
+Linear 16-bit frames (DNG, 16-bit PNG/TIFF) are normalised to sRGB uint8 with one gain
+for the recording (:mod:`lburst.raw`); 8-bit frames pass unchanged.
+
+Sidecar files (optional), next to a video ``X.mp4`` or inside a folder ``X/``:
+
+- ``X.meta.json`` / ``X/meta.json``: ``{"fps": ..., "camera": COLMAP camera dict}``
+  (fps of a frame folder, default 30; the camera's intrinsics as a prior);
+- ``X.gt.txt`` / ``X/gt.txt``: ground-truth camera poses per frame, TUM format
+  (:mod:`lburst.tum`), timestamps on the recording's clock.
+
+Every problem raises :class:`lburst.io.BurstError` naming the file; bursts yielded
+before it stay valid.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from lburst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_key, read_image
+from lburst.raw import RAW_SUFFIXES, Normalisation, normalise, read_dng
+
+DEFAULT_FPS = 30.0
+
+
+@dataclass(frozen=True)
+class RecordingOptions:
+    """How a recording is cut into bursts (module docstring).
+
+    Attributes:
+        burst: frames per burst (odd).
+        every: a keyframe every this many frames.
+        start: index of the first keyframe.
+        fps: frame rate of a frame folder (default: its ``meta.json``, else 30).
+        normalisation: brightness normalisation of linear 16-bit frames.
+        max_frames: stop reading after this many frames (``None``: all).
+    """
+
+    burst: int = 5
+    every: int = 10
+    start: int = 0
+    fps: float | None = None
+    normalisation: Normalisation = field(default_factory=Normalisation)
+    max_frames: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.burst < 1 or self.burst % 2 == 0:
+            raise ValueError(f"--burst must be odd and positive (the middle frame is the keyframe), got {self.burst}")
+        if self.every < 1:
+            raise ValueError(f"--every must be at least 1, got {self.every}")
+        if self.start < 0 or (self.fps is not None and self.fps <= 0):
+            raise ValueError("start must be >= 0 and fps positive")
+
+    def signature(self) -> str:
+        """What changes the bursts (for caches): burst, every, start, fps, normalisation."""
+        n = self.normalisation
+        return (f"burst={self.burst},every={self.every},start={self.start},fps={self.fps},"
+                f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain}")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One decoded frame: index (module docstring), timestamp (s), RGB ``(H, W, 3)`` uint8/uint16, file."""
+
+    index: int
+    time: float
+    image: np.ndarray
+    source: str
+
+
+@dataclass(frozen=True)
+class Keyframe:
+    """A keyframe: its frame index, timestamp (s) and how many burst frames were filled in."""
+
+    index: int
+    time: float
+    filled: int = 0
+
+    @property
+    def name(self) -> str:
+        """``f<index>_t<seconds>s``, e.g. ``f000064_t3.200s``: file-safe, in natural order."""
+        return f"f{self.index:06d}_t{self.time:.3f}s"
+
+
+def _sidecar(path: Path, name: str) -> Path:
+    return path / name if path.is_dir() else path.with_name(f"{path.stem}.{name}")
+
+
+def meta_path(path: str | Path) -> Path:
+    return _sidecar(Path(path), "meta.json")
+
+
+def ground_truth_path(path: str | Path) -> Path:
+    return _sidecar(Path(path), "gt.txt")
+
+
+def frame_files(folder: Path) -> list[Path]:
+    """The frame files of a recording folder (images and DNG), naturally sorted."""
+    suffixes = IMAGE_SUFFIXES + RAW_SUFFIXES
+    return sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in suffixes
+                   and not p.name.startswith(".")), key=lambda p: natural_key(p.name))
+
+
+def is_recording(path: str | Path) -> bool:
+    """A video file, or a folder with a ``meta.json`` or with DNG frames (other folders are scenes or bursts)."""
+    path = Path(path)
+    if path.suffix.lower() in VIDEO_SUFFIXES and not path.is_dir():
+        return True
+    return path.is_dir() and ((path / "meta.json").is_file() or any(p.suffix.lower() in RAW_SUFFIXES
+                                                                    for p in path.iterdir()))
+
+
+def read_frame(path: Path) -> np.ndarray:
+    """A frame file as RGB uint8/uint16 (DNG: linear uint16, :func:`lburst.raw.read_dng`)."""
+    return read_dng(path) if path.suffix.lower() in RAW_SUFFIXES else read_image(path)
+
+
+class Recording:
+    """A video or a frame folder (module docstring): ``frames()`` streams its frames."""
+
+    def __init__(self, path: str | Path, options: RecordingOptions = RecordingOptions()):
+        self.path = Path(path)
+        self.options = options
+        if not self.path.exists():
+            raise BurstError(f"{self.path}: no such file or folder")
+        meta = meta_path(self.path)
+        try:
+            self.meta = json.loads(meta.read_text()) if meta.is_file() else {}
+        except json.JSONDecodeError as err:
+            raise BurstError(f"{meta}: not valid JSON ({err})") from err
+        self.is_video = self.path.is_file()
+        if self.is_video:
+            if self.path.stat().st_size == 0:
+                raise BurstError(f"{self.path}: empty file (zero-length video)")
+            self.files: list[Path] = []
+            self.fps, self.frame_count = self._probe_video()
+        else:
+            self.files = frame_files(self.path)
+            if not self.files:
+                raise BurstError(f"{self.path}: no frames ({', '.join(IMAGE_SUFFIXES + RAW_SUFFIXES)})")
+            self.fps = float(options.fps or self.meta.get("fps") or DEFAULT_FPS)
+            self.indices = self._file_indices()
+            self.frame_count = self.indices[-1] + 1
+        self.gain: float | None = None  # set by bursts() from the first burst of linear frames
+
+    @property
+    def camera(self) -> dict | None:
+        """The camera of ``meta.json`` (a COLMAP camera dict), if any."""
+        return self.meta.get("camera")
+
+    @property
+    def ground_truth(self) -> Path | None:
+        path = ground_truth_path(self.path)
+        return path if path.is_file() else None
+
+    def _open_video(self):
+        import av
+
+        try:
+            container = av.open(str(self.path))
+        except (av.FFmpegError, OSError) as err:
+            raise BurstError(f"{self.path}: not a readable video ({err}); truncated or not a video file?") from err
+        if not container.streams.video:
+            container.close()
+            raise BurstError(f"{self.path}: no video stream")
+        return container
+
+    def _probe_video(self) -> tuple[float, int | None]:
+        container = self._open_video()
+        try:
+            stream = container.streams.video[0]
+            rate = stream.average_rate or stream.guessed_rate
+            if not rate:
+                raise BurstError(f"{self.path}: the video stream has no frame rate")
+            return float(rate), (int(stream.frames) or None)
+        finally:
+            container.close()
+
+    def _file_indices(self) -> list[int]:
+        numbers = [re.findall(r"\d+", p.stem) for p in self.files]
+        if all(numbers):
+            indices = [int(n[-1]) for n in numbers]
+            if len(set(indices)) == len(indices):
+                first = indices[0]
+                return [i - first for i in indices]
+        return list(range(len(self.files)))
+
+    def frames(self) -> Iterator[Frame]:
+        """Frames in temporal order, one at a time (module docstring)."""
+        limit = self.options.max_frames
+        source = self._video_frames() if self.is_video else self._folder_frames()
+        for count, frame in enumerate(source):
+            if limit is not None and count >= limit:
+                return
+            yield frame
+
+    def _folder_frames(self) -> Iterator[Frame]:
+        for path, index in zip(self.files, self.indices):
+            yield Frame(index, index / self.fps, read_frame(path), str(path))
+
+    def _video_frames(self) -> Iterator[Frame]:
+        import av
+
+        container = self._open_video()
+        decoded, t0, last = 0, None, -1
+        try:
+            stream = container.streams.video[0]
+            stream.thread_type = "AUTO"
+            try:
+                for frame in container.decode(stream):
+                    time = float(frame.time) if frame.time is not None else decoded / self.fps
+                    t0 = time if t0 is None else t0
+                    index = int(round((time - t0) * self.fps))
+                    if index <= last:  # a repeated timestamp: keep the frames in decode order
+                        index = last + 1
+                    last = index
+                    decoded += 1
+                    yield Frame(index, time, frame.to_ndarray(format="rgb24"), str(self.path))
+            except av.FFmpegError as err:
+                raise BurstError(f"{self.path}: decoding stopped after {decoded} frames ({err}); "
+                                 "the file is truncated or corrupt") from err
+        finally:
+            container.close()
+        if decoded == 0:
+            raise BurstError(f"{self.path}: no frames could be decoded (zero-length or truncated video)")
+        if self.frame_count and decoded < self.frame_count and self.options.max_frames is None:
+            raise BurstError(f"{self.path}: only {decoded} of its {self.frame_count} frames could be decoded; "
+                             "the file is truncated")
+
+    def keyframe_indices(self) -> list[int] | None:
+        """Indices of the keyframes that have a frame (``None`` for a video: known only after decoding)."""
+        if self.is_video:
+            return None
+        have = set(self.indices)
+        o = self.options
+        return [k for k in range(o.start, self.frame_count, o.every) if k in have]
+
+    def bursts(self) -> Iterator[tuple[Keyframe, np.ndarray]]:
+        """``(keyframe, burst (N, H, W, 3))`` in temporal order (module docstring); the burst is
+        normalised (uint8) when the frames are linear 16-bit and the normalisation asks for it."""
+        o = self.options
+        half = o.burst // 2
+        buffer: dict[int, Frame] = {}
+        next_key = o.start
+        first: Frame | None = None
+        for frame in self.frames():
+            if first is None:
+                first = frame
+            elif frame.image.shape != first.image.shape or frame.image.dtype != first.image.dtype:
+                raise BurstError(f"{frame.source}: frame {frame.index} is {_describe(frame.image)}, "
+                                 f"the first frame ({first.source}) {_describe(first.image)}; mixed frame sizes")
+            while next_key + half < frame.index:
+                yield from self._emit(next_key, buffer)
+                next_key += o.every
+                for i in [i for i in buffer if i < next_key - half]:
+                    del buffer[i]
+            if frame.index >= next_key - half:
+                buffer[frame.index] = frame
+        while buffer and next_key <= max(buffer):
+            yield from self._emit(next_key, buffer)
+            next_key += o.every
+
+    def _emit(self, key: int, buffer: dict[int, Frame]) -> Iterator[tuple[Keyframe, np.ndarray]]:
+        if key not in buffer:
+            return  # the keyframe itself was dropped
+        half = self.options.burst // 2
+        window = [i for i in range(key - half, key + half + 1) if i in buffer]
+        frames, filled = [], 0
+        for i in range(key - half, key + half + 1):
+            if i not in buffer:
+                filled += 1
+                i = min(window, key=lambda j: (abs(j - i), abs(j - key)))
+            frames.append(buffer[i].image)
+        burst = np.stack(frames)
+        if burst.dtype == np.uint16:
+            if self.gain is None:
+                self.gain = self.options.normalisation.estimate_gain(burst)
+            burst = normalise(burst, self.gain)
+        yield Keyframe(key, buffer[key].time, filled), burst
+
+
+def _describe(image: np.ndarray) -> str:
+    return f"{image.shape[1]}x{image.shape[0]} {image.dtype}"
+
+
+def add_recording_arguments(p) -> None:
+    """The command-line options of :class:`RecordingOptions` (for commands that read recordings)."""
+    g = p.add_argument_group("recordings (a video, or a folder of consecutive frames or DNGs)")
+    g.add_argument("--burst", type=int, default=5, help="frames per burst, odd, centred on each keyframe (default 5)")
+    g.add_argument("--every", type=int, default=10, help="a keyframe every this many frames (default 10)")
+    g.add_argument("--start", type=int, default=0, help="frame index of the first keyframe (default 0)")
+    g.add_argument("--fps", type=float, help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})")
+    g.add_argument("--raw-gain", default="auto",
+                   help="linear 16-bit frames: 'auto' (gain from the 99.5th luminance percentile of the first burst, "
+                        "then sRGB to 8 bit), 'none' (keep linear), or a fixed gain")
+
+
+def recording_options(args) -> RecordingOptions:
+    """:class:`RecordingOptions` from :func:`add_recording_arguments`' options (``ValueError`` if bad)."""
+    return RecordingOptions(burst=args.burst, every=args.every, start=args.start, fps=args.fps,
+                            normalisation=Normalisation(gain=args.raw_gain))
+
+
+def open_recording(path: str | Path, options: RecordingOptions = RecordingOptions()) -> Recording:
+    """The recording at ``path`` (module docstring); ``BurstError`` naming the file if it cannot be used."""
+    return Recording(path, options)
