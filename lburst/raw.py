@@ -43,10 +43,11 @@ def read_dng(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise BurstError(f"{path}: no such file")
+    problem = dng_problem(path)
+    if problem:
+        raise BurstError(f"{path}: {problem}")
     try:
         with rawpy.imread(str(path)) as raw:
-            if raw.raw_type != rawpy.RawType.Flat or raw.raw_pattern is None or raw.num_colors < 3:
-                raise BurstError(f"{path}: not a Bayer (CFA) raw image: no CFA pattern tags")
             return raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True,
                                    adjust_maximum_thr=0.0, user_flip=0,
                                    demosaic_algorithm=rawpy.DemosaicAlgorithm.AHD)
@@ -54,6 +55,29 @@ def read_dng(path: str | Path) -> np.ndarray:
         raise
     except (rawpy.LibRawError, OSError, ValueError) as err:
         raise BurstError(f"{path}: not a readable DNG ({type(err).__name__}: {err})") from err
+
+
+def dng_problem(path: Path) -> str | None:
+    """Why ``path`` is not a DNG LibRaw can develop as documented, or ``None``: it needs a
+    ``DNGVersion`` tag and a raw image (main IFD or SubIFD) that is a CFA mosaic
+    (``PhotometricInterpretation`` 32803 with ``CFARepeatPatternDim``/``CFAPattern``) or
+    linear raw (34892).  LibRaw itself would guess a Bayer pattern for any grey TIFF."""
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(path) as tif:
+            pages = list(tif.pages)
+            for page in list(pages):
+                pages += list(getattr(page, "pages", None) or [])
+            if not pages or 50706 not in pages[0].tags:
+                return "not a DNG (no DNGVersion tag)"
+            for page in pages:
+                photometric = int(page.tags[262].value) if 262 in page.tags else None
+                if photometric == 34892 or (photometric == 32803 and 33421 in page.tags and 33422 in page.tags):
+                    return None
+            return "DNG without a CFA image: no PhotometricInterpretation 32803 with CFARepeatPatternDim/CFAPattern tags"
+    except (tifffile.TiffFileError, OSError, ValueError, KeyError) as err:
+        return f"not a readable DNG/TIFF ({err})"
 
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:

@@ -184,7 +184,8 @@ class Recording:
             raise BurstError(f"{self.path}: not a readable video ({err}); truncated or not a video file?") from err
         if not container.streams.video:
             container.close()
-            raise BurstError(f"{self.path}: no video stream")
+            raise BurstError(f"{self.path}: no video stream found (a truncated MP4 whose index was at the end, "
+                             "or not a video)")
         return container
 
     def _probe_video(self) -> tuple[float, int | None]:

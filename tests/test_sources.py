@@ -1,0 +1,153 @@
+"""Recordings as burst sources: keyframe schedule, edges and dropped frames, streaming, bad files."""
+
+import numpy as np
+import pytest
+
+from lburst.io import BurstError, write_image
+from lburst.raw import Normalisation
+from lburst.sources import Keyframe, RecordingOptions, is_recording, open_recording
+
+
+def _frame(value: int, size=(24, 32), dtype=np.uint8) -> np.ndarray:
+    return np.full(size + (3,), value, dtype)
+
+
+def _folder(tmp_path, indices, dtype=np.uint8, scale=10):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in indices:
+        write_image(folder / f"img_{i}.png", _frame(i * scale, dtype=dtype))  # unpadded: natural sort needed
+    (folder / "meta.json").write_text('{"fps": 10}')
+    return folder
+
+
+def _values(burst: np.ndarray) -> list[int]:
+    return [int(f[0, 0, 0]) for f in burst]
+
+
+def test_folder_keyframes_edges_and_dropped_frames(tmp_path):
+    folder = _folder(tmp_path, [i for i in range(12) if i != 6])  # frame 6 dropped
+    assert is_recording(folder)
+    rec = open_recording(folder, RecordingOptions(burst=5, every=4))
+    got = list(rec.bursts())
+    assert [k.index for k, _ in got] == [0, 4, 8]
+    (k0, b0), (k4, b4), (k8, b8) = got
+    assert k0 == Keyframe(0, 0.0, 2) and k0.name == "f000000_t0.000s"
+    assert _values(b0) == [0, 0, 0, 10, 20]  # before the start: the nearest frame there is
+    assert _values(b4) == [20, 30, 40, 50, 50] and k4.filled == 1  # frame 6 dropped: its neighbour 5
+    assert k8.time == pytest.approx(0.8) and _values(b8) == [70, 70, 80, 90, 100]
+    assert all(b.shape == (5, 24, 32, 3) for _, b in got)
+
+
+def test_dropped_keyframe_is_skipped_and_every_frame_can_be_a_keyframe(tmp_path):
+    folder = _folder(tmp_path, [0, 1, 2, 4, 5])
+    keys = [k.index for k, _ in open_recording(folder, RecordingOptions(burst=3, every=1)).bursts()]
+    assert keys == [0, 1, 2, 4, 5]
+
+
+def _video(path, n=40, fps=20, size=(48, 64), faststart=False):
+    import av
+
+    with av.open(str(path), "w", options={"movflags": "+faststart"} if faststart else {}) as container:
+        stream = container.add_stream("libx264", rate=fps)
+        stream.height, stream.width = size
+        stream.pix_fmt = "yuv444p"
+        stream.options = {"crf": "0"}
+        for i in range(n):
+            frame = av.VideoFrame.from_ndarray(_frame(min(5 * i, 255), size), format="rgb24")
+            frame.pts = i
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        for packet in stream.encode(None):
+            container.mux(packet)
+    return path
+
+
+def test_video_streams_keyframe_bursts_with_timestamps(tmp_path):
+    pytest.importorskip("av")
+    video = _video(tmp_path / "v.mp4")
+    rec = open_recording(video, RecordingOptions(burst=5, every=8, start=2))
+    assert rec.fps == 20 and rec.frame_count == 40
+    got = list(rec.bursts())
+    assert [k.index for k, _ in got] == [2, 10, 18, 26, 34]
+    assert [k.name for k, _ in got][:2] == ["f000002_t0.100s", "f000010_t0.500s"]
+    for k, burst in got:  # the burst is frames k-2..k+2, in order
+        assert np.allclose(_values(burst), [5 * min(max(i, 0), 39) for i in range(k.index - 2, k.index + 3)], atol=2)
+
+
+def test_bad_videos_name_the_file_and_keep_finished_keyframes(tmp_path):
+    pytest.importorskip("av")
+    empty = tmp_path / "empty.mp4"
+    empty.write_bytes(b"")
+    with pytest.raises(BurstError, match="empty.mp4.*zero-length"):
+        open_recording(empty)
+    junk = tmp_path / "junk.mp4"
+    junk.write_bytes(b"not a video" * 100)
+    with pytest.raises(BurstError, match="junk.mp4"):
+        open_recording(junk)
+    video = _video(tmp_path / "v.mp4", n=60)
+    data = video.read_bytes()
+    (tmp_path / "cut.mp4").write_bytes(data[: len(data) * 2 // 3])  # index at the end: nothing to recover
+    with pytest.raises(BurstError, match=r"cut.mp4: no video stream found \(a truncated"):
+        open_recording(tmp_path / "cut.mp4")
+    video = _video(tmp_path / "fast.mp4", n=60, faststart=True)  # index first: the frames before the cut decode
+    data = video.read_bytes()
+    (tmp_path / "fastcut.mp4").write_bytes(data[: len(data) * 2 // 3])
+    done = []
+    with pytest.raises(BurstError, match="fastcut.mp4: .*truncated") as err:
+        for keyframe, _ in open_recording(tmp_path / "fastcut.mp4", RecordingOptions(burst=3, every=10)).bursts():
+            done.append(keyframe.index)
+    assert "\n" not in str(err.value)
+    assert done and done == list(range(0, 10 * len(done), 10)) and len(done) < 6
+
+
+def test_mixed_frame_sizes_name_the_frame(tmp_path):
+    folder = _folder(tmp_path, range(8))
+    write_image(folder / "img_6.png", np.zeros((10, 10, 3), np.uint8))
+    done = []
+    with pytest.raises(BurstError, match=r"img_6.png.*10x10.*mixed frame sizes"):
+        for keyframe, _ in open_recording(folder, RecordingOptions(burst=3, every=3)).bursts():
+            done.append(keyframe.index)
+    assert done == [0, 3]  # finished before the bad frame
+
+
+def test_sixteen_bit_frames_get_one_gain_per_recording(tmp_path):
+    folder = _folder(tmp_path, range(9), dtype=np.uint16, scale=100)  # very dark linear frames
+    rec = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(percentile=100, target=0.5)))
+    bursts = list(rec.bursts())
+    assert rec.gain == pytest.approx(0.5 * 65535 / 100)  # brightest pixel of the first burst -> 0.5 linear
+    assert all(b.dtype == np.uint8 for _, b in bursts)
+    # the same linear value gives the same output in every burst: frame 1 and frame 4 (first and second bursts)
+    assert bursts[0][1][2, 0, 0, 0] > 0
+    linear = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(gain="none")))
+    assert all(b.dtype == np.uint16 for _, b in linear.bursts())
+
+
+def test_dng_frames_read_linear_and_without_cfa_fail_clearly(tmp_path):
+    pytest.importorskip("rawpy")
+    tifffile = pytest.importorskip("tifffile")
+    from lburst.raw import read_dng
+    from lburst.scenes.dng import mosaic, write_dng
+
+    image = np.zeros((32, 48, 3))
+    image[..., 0], image[..., 1], image[..., 2] = 0.5, 0.25, 0.125
+    black, white = 256, 4095
+    write_dng(tmp_path / "a.dng", np.round(black + mosaic(image) * (white - black)).astype(np.uint16), black, white)
+    out = read_dng(tmp_path / "a.dng")
+    assert out.dtype == np.uint16 and out.shape == (32, 48, 3)
+    assert np.allclose(out[8:-8, 8:-8].reshape(-1, 3).mean(0) / 65535, [0.5, 0.25, 0.125], atol=2e-3)
+    tifffile.imwrite(tmp_path / "plain.dng", np.zeros((32, 48), np.uint16))  # LibRaw alone would take it
+    with pytest.raises(BurstError, match="plain.dng: not a DNG"):
+        read_dng(tmp_path / "plain.dng")
+    tifffile.imwrite(tmp_path / "nocfa.dng", np.zeros((32, 48), np.uint16), extratags=[(50706, 1, 4, (1, 4, 0, 0), True)])
+    with pytest.raises(BurstError, match="nocfa.dng: DNG without a CFA image"):
+        read_dng(tmp_path / "nocfa.dng")
+
+
+def test_options_are_checked():
+    with pytest.raises(ValueError, match="odd"):
+        RecordingOptions(burst=4)
+    with pytest.raises(ValueError, match="every"):
+        RecordingOptions(every=0)
+    with pytest.raises(ValueError, match="gain"):
+        Normalisation(gain="bright")
