@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import re
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -164,6 +165,7 @@ class Recording:
             self.indices = self._file_indices()
             self.frame_count = self.indices[-1] + 1
         self.gain: float | None = None  # set by bursts() from the first burst of linear frames
+        self.frames_read, self.read_seconds = 0, 0.0
 
     @property
     def camera(self) -> dict | None:
@@ -209,12 +211,17 @@ class Recording:
         return list(range(len(self.files)))
 
     def frames(self) -> Iterator[Frame]:
-        """Frames in temporal order, one at a time (module docstring)."""
+        """Frames in temporal order, one at a time (module docstring).  ``frames_read`` and
+        ``read_seconds`` count them and the time spent reading and decoding them."""
         limit = self.options.max_frames
         source = self._video_frames() if self.is_video else self._folder_frames()
-        for count, frame in enumerate(source):
-            if limit is not None and count >= limit:
+        while limit is None or self.frames_read < limit:
+            start = time.perf_counter()
+            frame = next(source, None)
+            self.read_seconds += time.perf_counter() - start
+            if frame is None:
                 return
+            self.frames_read += 1
             yield frame
 
     def _folder_frames(self) -> Iterator[Frame]:
@@ -231,14 +238,14 @@ class Recording:
             stream.thread_type = "AUTO"
             try:
                 for frame in container.decode(stream):
-                    time = float(frame.time) if frame.time is not None else decoded / self.fps
-                    t0 = time if t0 is None else t0
-                    index = int(round((time - t0) * self.fps))
+                    stamp = float(frame.time) if frame.time is not None else decoded / self.fps
+                    t0 = stamp if t0 is None else t0
+                    index = int(round((stamp - t0) * self.fps))
                     if index <= last:  # a repeated timestamp: keep the frames in decode order
                         index = last + 1
                     last = index
                     decoded += 1
-                    yield Frame(index, time, frame.to_ndarray(format="rgb24"), str(self.path))
+                    yield Frame(index, stamp, frame.to_ndarray(format="rgb24"), str(self.path))
             except av.FFmpegError as err:
                 raise BurstError(f"{self.path}: decoding stopped after {decoded} frames ({err}); "
                                  "the file is truncated or corrupt") from err
@@ -307,10 +314,11 @@ def _describe(image: np.ndarray) -> str:
 
 
 def add_recording_arguments(p) -> None:
-    """The command-line options of :class:`RecordingOptions` (for commands that read recordings)."""
-    g = p.add_argument_group("recordings (a video, or a folder of consecutive frames or DNGs)")
-    g.add_argument("--burst", type=int, default=5, help="frames per burst, odd, centred on each keyframe (default 5)")
-    g.add_argument("--every", type=int, default=10, help="a keyframe every this many frames (default 10)")
+    """The command-line options of :class:`RecordingOptions` (for commands that read recordings);
+    ``--every`` stays ``None`` when not given (:func:`recording_options` reads it as 10)."""
+    g = p.add_argument_group("recordings (a video, or a folder of consecutive frames or DNGs, with a meta.json)")
+    g.add_argument("--burst", dest="burst_frames", type=int, default=5, help="frames per burst, odd, centred on each keyframe (default 5)")
+    g.add_argument("--every", type=int, help="a keyframe every this many frames (default 10)")
     g.add_argument("--start", type=int, default=0, help="frame index of the first keyframe (default 0)")
     g.add_argument("--fps", type=float, help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})")
     g.add_argument("--raw-gain", default="auto",
@@ -320,7 +328,7 @@ def add_recording_arguments(p) -> None:
 
 def recording_options(args) -> RecordingOptions:
     """:class:`RecordingOptions` from :func:`add_recording_arguments`' options (``ValueError`` if bad)."""
-    return RecordingOptions(burst=args.burst, every=args.every, start=args.start, fps=args.fps,
+    return RecordingOptions(burst=args.burst_frames, every=args.every or 10, start=args.start, fps=args.fps,
                             normalisation=Normalisation(gain=args.raw_gain))
 
 

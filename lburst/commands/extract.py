@@ -17,6 +17,7 @@ from tqdm import tqdm
 from lburst.io import BurstError, load_burst, write_features_h5, write_features_npz
 from lburst.methods import create
 from lburst.model import AUTOCAST_DTYPES, CheckpointError
+from lburst.sources import add_recording_arguments, is_recording, open_recording, recording_options
 
 
 def burst_name(path: Path) -> str:
@@ -39,7 +40,9 @@ def method_spec(method: str | None, weights: str | None, frame_order: str | None
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("bursts", nargs="+", type=Path, help="burst folders, images or videos")
+    p.add_argument("bursts", nargs="+", type=Path,
+                   help="burst folders, images or videos (a whole video is one burst unless --every is given), "
+                        "or recordings: features of each keyframe burst go to OUT/<recording>/<keyframe>.npz")
     p.add_argument("--out", type=Path, required=True, help="output folder for <burst>.npz")
     p.add_argument("--weights", help="checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
     p.add_argument("--method", help="any method spec, e.g. sift, orb, merge+sift, buff (default: lburst)")
@@ -52,6 +55,31 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--precision", choices=list(AUTOCAST_DTYPES), default="fp32",
                    help="backbone precision of learned methods: bf16 is faster on CPUs with AVX512-BF16 or AMX "
                         "(heads stay fp32; about 99%% of keypoints within 1 px of fp32), fp16 on a GPU")
+    add_recording_arguments(p)
+
+
+def extract_recording(path: Path, extractor, args: argparse.Namespace) -> tuple[int, int, str | None]:
+    """Features of every keyframe burst of a recording, one ``.npz`` each in ``OUT/<recording>/``;
+    returns (extracted, already done, why reading stopped or ``None``).  Keyframes finished
+    before a bad frame are kept."""
+    folder = args.out / burst_name(path)
+    done = skipped = 0
+    try:
+        for keyframe, burst in open_recording(path, recording_options(args)).bursts():
+            target = folder / f"{keyframe.name}.npz"
+            if target.exists() and not args.overwrite:
+                skipped += 1
+                continue
+            features = extractor(burst)
+            size = (burst.shape[2], burst.shape[1])
+            if args.h5:
+                write_features_h5(args.out / "features.h5", f"{burst_name(path)}/{keyframe.name}", features, size)
+            folder.mkdir(parents=True, exist_ok=True)
+            write_features_npz(target, features, size)
+            done += 1
+    except BurstError as exc:
+        return done, skipped, str(exc)
+    return done, skipped, None
 
 
 def main(args: argparse.Namespace) -> int:
@@ -71,7 +99,21 @@ def main(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     failed: list[tuple[Path, str]] = []
     done = 0
+    try:
+        recording_options(args)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     for path in tqdm(args.bursts, desc=f"extract {spec}", unit="burst"):
+        if is_recording(path) and (path.is_dir() or args.every is not None):
+            new, old, problem = extract_recording(path, extractor, args)
+            tqdm.write(f"{path}: {new} keyframes extracted, {old} already done")
+            done += 1
+            if problem:
+                failed.append((path, problem))
+                tqdm.write(f"stopped {path}: {problem}", file=sys.stderr)
+                done -= 1
+            continue
         name = burst_name(path)
         target = args.out / f"{name}.npz"
         if target.exists() and not args.overwrite:

@@ -14,7 +14,10 @@ from lburst.viz import plot_keypoints_and_maps
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("burst", type=Path, help="burst folder, image or video")
+    p.add_argument("burst", type=Path, help="burst folder, image or video, or a recording (video, or a folder of "
+                                            "frames or DNGs with meta.json): then the burst centred on --frame")
+    p.add_argument("--frame", type=int, help="recording: the keyframe's frame index (a video without it is one burst)")
+    p.add_argument("--frames", type=int, default=5, help="recording: frames in the burst (odd, default 5)")
     p.add_argument("--weights", help="checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
     p.add_argument("--frame-order", choices=["temporal", "published"], default="temporal")
     p.add_argument("--top-k", type=int, default=4000)
@@ -32,10 +35,28 @@ def load_model(weights: str | None, frame_order: str = "temporal", device: str |
     return LBurst.pretrained("lburst-b5", device=device)
 
 
+def _is_recording(args: argparse.Namespace) -> bool:
+    from lburst.sources import is_recording
+
+    return is_recording(args.burst) and (args.burst.is_dir() or args.frame is not None)
+
+
+def load_recording_burst(args: argparse.Namespace):
+    """The burst of ``args.frames`` frames centred on frame ``args.frame`` (default 0) of a recording."""
+    from lburst.sources import RecordingOptions, open_recording
+
+    frame = args.frame or 0
+    options = RecordingOptions(burst=args.frames, every=1, start=frame, max_frames=frame + args.frames // 2 + 1)
+    for keyframe, burst in open_recording(args.burst, options).bursts():
+        if keyframe.index == frame:
+            return burst
+    raise BurstError(f"{args.burst}: no frame {frame}")
+
+
 def main(args: argparse.Namespace) -> int:
     try:
         model = load_model(args.weights, args.frame_order, args.device)
-        burst = load_burst(args.burst)
+        burst = load_recording_burst(args) if _is_recording(args) else load_burst(args.burst)
     except (CheckpointError, BurstError, FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

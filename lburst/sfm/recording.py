@@ -67,6 +67,8 @@ def load_keyframes(out: Path, key: str) -> list[Keyframe] | None:
 def save_keyframes(out: Path, key: str, recording: Recording, keyframes: list[Keyframe], error: str | None) -> None:
     data = {"recording": str(recording.path), "key": key, "complete": error is None, "error": error,
             "fps": recording.fps, "gain": recording.gain, "options": recording.options.signature(),
+            "frames_read": recording.frames_read, "read_seconds": round(recording.read_seconds, 3),
+            "read_fps": round(recording.frames_read / recording.read_seconds, 1) if recording.read_seconds else None,
             "keyframes": [{"name": k.name, "index": k.index, "time": k.time, "filled": k.filled} for k in keyframes]}
     with atomic_path(out / KEYFRAMES_FILE) as tmp:
         tmp.write_text(json.dumps(data, indent=1))
