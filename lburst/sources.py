@@ -257,14 +257,6 @@ class Recording:
             raise BurstError(f"{self.path}: only {decoded} of its {self.frame_count} frames could be decoded; "
                              "the file is truncated")
 
-    def keyframe_indices(self) -> list[int] | None:
-        """Indices of the keyframes that have a frame (``None`` for a video: known only after decoding)."""
-        if self.is_video:
-            return None
-        have = set(self.indices)
-        o = self.options
-        return [k for k in range(o.start, self.frame_count, o.every) if k in have]
-
     def bursts(self) -> Iterator[tuple[Keyframe, np.ndarray]]:
         """``(keyframe, burst (N, H, W, 3))`` in temporal order (module docstring); the burst is
         normalised (uint8) when the frames are linear 16-bit and the normalisation asks for it."""

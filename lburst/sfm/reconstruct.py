@@ -226,8 +226,13 @@ def recording_features(path: str | Path, spec: str, out: Path, opts: Reconstruct
     except BurstError as err:
         raise ReconstructionError(str(err)) from err
     key = f"{spec}|{rec.cache_key(recording)}"
-    paths = lambda name: (out / "features" / f"{_safe_name(name)}.npz", out / "images" / f"{name}.png")  # noqa: E731
-    cached = lambda name: load_features(paths(name)[0], key) is not None and paths(name)[1].is_file()  # noqa: E731
+
+    def paths(name: str) -> tuple[Path, Path]:
+        return out / "features" / f"{_safe_name(name)}.npz", out / "images" / f"{name}.png"
+
+    def cached(name: str) -> bool:
+        return load_features(paths(name)[0], key) is not None and paths(name)[1].is_file()
+
     keyframes = rec.load_keyframes(out, key)
     error = None
     if keyframes is None or not all(cached(k.name) for k in keyframes):
