@@ -271,3 +271,28 @@ def test_distillation_pulls_the_noisy_output_towards_the_clean_one(photos):
     assert values[-1] < values[0]
     with pytest.raises(ValueError, match="teacher"):
         training_step(net, batch, patch=8, distill_weight=1.0)
+
+
+def test_sigterm_stops_a_run_like_ctrl_c_keeping_its_finished_steps(photos, tmp_path, monkeypatch):
+    """A run in the background ignores SIGINT; SIGTERM during step 3 keeps steps 1-2."""
+    import os
+    import signal
+
+    import lburst.train.loop as loop
+
+    calls = {"n": 0}
+    real_step = loop.training_step
+
+    def terminated_at_third(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real_step(*args, **kwargs)
+
+    cfg = TrainConfig(frames=3, batch_size=2, steps=4, patch=8, workers=0, pair=TINY)
+    monkeypatch.setattr(loop, "training_step", terminated_at_third)
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt):
+        train([photos], tmp_path, cfg, progress=False)
+    assert torch.load(tmp_path / "last.pt", weights_only=True)["step"] <= 3
+    assert signal.getsignal(signal.SIGTERM) is before  # the handler is put back

@@ -15,6 +15,8 @@ import argparse
 import csv
 import json
 import os
+import signal
+import threading
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
@@ -287,6 +289,7 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     bar = tqdm(total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main),
                dynamic_ncols=True)
     data = iter(loader)
+    previous = _stop_on_sigterm()
     try:
         while step < total:
             if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
@@ -315,10 +318,13 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             if time.monotonic() - last_save > cfg.checkpoint_every_s:
                 checkpoint()
                 last_save = time.monotonic()
-    except KeyboardInterrupt:  # keep every finished step; a --resume continues from here
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep every finished step; a --resume continues from here
         if ctx.main:
             checkpoint()
         raise
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     bar.close()
     if ctx.main:
         checkpoint()
@@ -328,6 +334,18 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
         writer.close()
     ctx.close()
     return last
+
+
+def _stop_on_sigterm():
+    """Make SIGTERM stop training like Ctrl-C (a run in the background ignores SIGINT);
+    returns the previous handler, or None off the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    return signal.signal(signal.SIGTERM, stop)
 
 
 def _tensorboard_writer(out: Path):
