@@ -15,7 +15,8 @@ photos, so a linear 16-bit frame is turned into what they saw:
    luminance (Rec. 709 weights) of the frames of the first burst, clamped to
    ``[1, max_gain]``; fixed for the recording, so every burst (and a resumed run)
    gets the same brightness;
-3. the sRGB transfer curve (IEC 61966-2-1), then rounding to uint8.
+3. ``curve='srgb'``: the sRGB transfer curve (IEC 61966-2-1); ``curve='linear'``: none
+   (the gain alone, as a mean-preserving noisy 8-bit frame looks); then rounding to uint8.
 
 This is what the feature methods and COLMAP's images get.  8-bit frames (video,
 8-bit PNG/JPEG) are already display-referred and pass unchanged.  ``gain='none'``
@@ -96,12 +97,14 @@ class Normalisation:
         percentile: which luminance percentile is mapped to ``target``.
         target: the linear value (0..1) the percentile is mapped to.
         max_gain: largest automatic gain.
+        curve: ``'srgb'`` or ``'linear'`` tone curve after the gain.
     """
 
     gain: str | float = "auto"
     percentile: float = 99.5
     target: float = 0.8
     max_gain: float = 4096.0
+    curve: str = "srgb"
 
     def __post_init__(self) -> None:
         if isinstance(self.gain, str) and self.gain not in ("auto", "none"):
@@ -111,6 +114,8 @@ class Normalisation:
                 raise ValueError(f"gain must be 'auto', 'none' or a number, got {self.gain!r}") from None
         if not isinstance(self.gain, str) and not self.gain > 0:
             raise ValueError(f"gain must be positive, got {self.gain}")
+        if self.curve not in ("srgb", "linear"):
+            raise ValueError(f"curve must be 'srgb' or 'linear', got {self.curve!r}")
         if not 0 < self.percentile <= 100 or not 0 < self.target <= 1 or self.max_gain < 1:
             raise ValueError("need 0 < percentile <= 100, 0 < target <= 1 and max_gain >= 1")
 
@@ -125,10 +130,11 @@ class Normalisation:
         return float(np.clip(self.target / max(level, 1e-12), 1.0, self.max_gain))
 
 
-def normalise(frames: np.ndarray, gain: float | None) -> np.ndarray:
+def normalise(frames: np.ndarray, gain: float | None, curve: str = "srgb") -> np.ndarray:
     """Linear uint16 frames ``(..., 3)`` to sRGB uint8 with ``gain`` (module docstring); unchanged for ``None``
     or for frames that are already uint8."""
     if gain is None or frames.dtype == np.uint8:
         return frames
     linear = np.asarray(frames, np.float32) * np.float32(gain / 65535.0)
-    return np.rint(srgb_encode(linear) * 255.0).astype(np.uint8)
+    encoded = srgb_encode(linear) if curve == "srgb" else np.clip(linear, 0.0, 1.0)
+    return np.rint(encoded * 255.0).astype(np.uint8)

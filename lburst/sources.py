@@ -78,7 +78,8 @@ class RecordingOptions:
         """What changes the bursts (for caches): burst, every, start, fps, normalisation."""
         n = self.normalisation
         return (f"burst={self.burst},every={self.every},start={self.start},fps={self.fps},"
-                f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain}")
+                f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain}"
+                + ("" if n.curve == "srgb" else f",curve={n.curve}"))
 
 
 @dataclass(frozen=True)
@@ -297,7 +298,7 @@ class Recording:
         if burst.dtype == np.uint16:
             if self.gain is None:
                 self.gain = self.options.normalisation.estimate_gain(burst)
-            burst = normalise(burst, self.gain)
+            burst = normalise(burst, self.gain, self.options.normalisation.curve)
         yield Keyframe(key, buffer[key].time, filled), burst
 
 
@@ -316,12 +317,14 @@ def add_recording_arguments(p) -> None:
     g.add_argument("--raw-gain", default="auto",
                    help="linear 16-bit frames: 'auto' (gain from the 99.5th luminance percentile of the first burst, "
                         "then sRGB to 8 bit), 'none' (keep linear), or a fixed gain")
+    g.add_argument("--raw-curve", choices=("srgb", "linear"), default="srgb",
+                   help="tone curve after the gain (default srgb)")
 
 
 def recording_options(args) -> RecordingOptions:
     """:class:`RecordingOptions` from :func:`add_recording_arguments`' options (``ValueError`` if bad)."""
     return RecordingOptions(burst=args.burst_frames, every=args.every or 10, start=args.start, fps=args.fps,
-                            normalisation=Normalisation(gain=args.raw_gain))
+                            normalisation=Normalisation(gain=args.raw_gain, curve=args.raw_curve))
 
 
 def open_recording(path: str | Path, options: RecordingOptions = RecordingOptions()) -> Recording:

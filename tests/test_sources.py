@@ -121,6 +121,10 @@ def test_sixteen_bit_frames_get_one_gain_per_recording(tmp_path):
     assert bursts[0][1][2, 0, 0, 0] > 0
     linear = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(gain="none")))
     assert all(b.dtype == np.uint16 for _, b in linear.bursts())
+    plain = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(
+        percentile=100, target=0.5, curve="linear")))
+    first = next(plain.bursts())[1]
+    assert _values(first) == [0, 0, 128]  # frames 0, 0, 1: linear 0, 0, 100 -> gain * 100 = half of white
 
 
 def test_dng_frames_read_linear_and_without_cfa_fail_clearly(tmp_path):
