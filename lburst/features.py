@@ -15,9 +15,20 @@ apparent motion in pixels per frame (BuFF).
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 
 Features = dict[str, np.ndarray]
+
+
+class Extractor(Protocol):
+    """A feature method: ``extractor(burst)`` with ``burst`` uint8/uint16 ``(N, H, W, 3)`` in
+    temporal order (N odd) returns the features of its common frame; ``name`` is its spec."""
+
+    name: str
+
+    def __call__(self, burst: np.ndarray) -> Features: ...
 
 REQUIRED = ("keypoints", "scales", "scores", "descriptors")
 

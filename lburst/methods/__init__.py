@@ -21,18 +21,11 @@ on the merged image (see :mod:`lburst.methods.merge`).  Examples: ``lburst``,
 from __future__ import annotations
 
 import importlib
-from typing import Callable, Protocol
+from typing import Callable
 
-import numpy as np
+from lburst.features import Extractor
 
-from lburst.features import Features
-
-
-class Extractor(Protocol):
-    name: str
-
-    def __call__(self, burst: np.ndarray) -> Features: ...
-
+__all__ = ["Extractor", "Factory", "available", "create", "parse_spec", "register"]
 
 Factory = Callable[..., Extractor]
 

@@ -15,8 +15,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from lburst.features import Features
-from lburst.methods import Extractor
+from lburst.features import Extractor, Features
 from lburst.methods.align import Method, Motion, estimate_shifts
 from lburst.methods.frames import check_burst, dtype_max
 

@@ -2,10 +2,26 @@
 
 Public API: :func:`reconstruct_scene` (one scene, one feature method) returning a
 :class:`ReconstructionResult`, and :func:`evaluate_against_reference` (trajectory
-errors and match precision against a scene's ``reference.json``).
+errors and match precision against a scene's ``reference.json``).  They are imported on
+first use, so that the COLMAP child (``python -m lburst.sfm.colmap``) and
+:mod:`lburst.sfm.poses` import no torch.
 """
 
-from lburst.sfm.reconstruct import ReconstructionError, ReconstructionResult, reconstruct_scene
-from lburst.sfm.metrics import evaluate_against_reference
+from __future__ import annotations
 
-__all__ = ["ReconstructionError", "ReconstructionResult", "reconstruct_scene", "evaluate_against_reference"]
+import importlib
+
+_EXPORTS = {
+    "ReconstructionError": "lburst.sfm.reconstruct",
+    "ReconstructionResult": "lburst.sfm.reconstruct",
+    "reconstruct_scene": "lburst.sfm.reconstruct",
+    "evaluate_against_reference": "lburst.sfm.metrics",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'lburst.sfm' has no attribute {name!r}")

@@ -29,11 +29,27 @@ import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import cv2  # noqa: F401  (must be loaded before pycolmap, see module docstring)
 import numpy as np
-import pycolmap
 
-from lburst.io import atomic_path, opencv_path
+from lburst.extras import LazyModule
+
+# Imported on first use, after cv2 (see the module docstring), so that importing this
+# module loads neither pycolmap nor OpenCV (nor torch: the child never needs it).
+pycolmap = LazyModule("pycolmap", "reconstruction", before=("cv2",))
+
+
+def atomic_path(path: str | Path):
+    """:func:`lburst.io.atomic_path`, imported when first written (it loads OpenCV)."""
+    from lburst.io import atomic_path as _atomic_path
+
+    return _atomic_path(path)
+
+
+def opencv_path(path: str | Path) -> str:
+    """:func:`lburst.io.opencv_path`, imported when first used."""
+    from lburst.io import opencv_path as _opencv_path
+
+    return _opencv_path(path)
 
 DEFAULT_FOCAL_FACTOR = 1.2  # COLMAP's own default prior: f = 1.2 * max(W, H)
 

@@ -31,16 +31,23 @@ converge contributes 0 registered images and 0 points, and no trajectory error
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from lburst.io import file_sha1
-from lburst.scenes.reference import Reference
+from lburst.sfm.reference import Reference
 from lburst.sfm.poses import path_length, trajectory_errors
 
-if TYPE_CHECKING:
-    from lburst.sfm.reconstruct import ReconstructionResult
+
+class Reconstruction(Protocol):
+    """What the metrics read of a reconstruction (:class:`lburst.sfm.reconstruct.ReconstructionResult` has it)."""
+
+    names: list[str]  # every image of the scene, in scene order
+    poses: dict[str, tuple[np.ndarray, np.ndarray]]  # registered image -> world-to-camera (R (3, 3), t (3,))
+
+    def match_data(self) -> tuple[list[np.ndarray], np.ndarray, list[np.ndarray]] | None:
+        """Keypoints per image, verified pairs (Q, 2) and their inlier matches, or ``None``."""
 
 PRECISION_THRESHOLD_PX = 4.0
 
@@ -141,7 +148,7 @@ def reference_length(reference: Reference, order: list[str]) -> float:
     return path_length(np.array([centres[n] for n in order if n in centres]))
 
 
-def evaluate_against_reference(result: "ReconstructionResult", reference: Reference | str | Path,
+def evaluate_against_reference(result: Reconstruction, reference: Reference | str | Path,
                                cameras: dict[str, dict] | None = None,
                                threshold: float = PRECISION_THRESHOLD_PX) -> dict[str, Any]:
     """Trajectory errors and match precision of ``result`` against ``reference`` (module docstring).

@@ -69,7 +69,7 @@ def _plot_trajectory(result: "ReconstructionResult", path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from lburst.scenes.reference import Reference
+    from lburst.sfm.reference import Reference
     from lburst.sfm.poses import umeyama
 
     est = {n: -np.asarray(R).T @ np.asarray(t) for n, (R, t) in result.poses.items()}

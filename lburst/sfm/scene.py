@@ -3,7 +3,7 @@
 A scene folder holds one sub-folder per burst, ``SCENE/<burst>/frame_000.png ...``, or
 single images ``SCENE/<name>.png|jpg|...``, named so that natural sort order
 (``2`` before ``10``) is trajectory order, and optionally ``SCENE/reference.json``
-(:class:`lburst.scenes.reference.Reference`).  An item's *name* is the sub-folder name
+(:class:`lburst.sfm.reference.Reference`).  An item's *name* is the sub-folder name
 or the image file's stem; it names the image in COLMAP and in ``reference.json``.
 
 ``reference.json`` may carry, beside its one ``camera``, a ``cameras`` object mapping
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from lburst.io import natural_key
-from lburst.scenes.reference import Reference
+from lburst.sfm.reference import Reference
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
 REFERENCE_FILE = "reference.json"

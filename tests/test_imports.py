@@ -1,0 +1,146 @@
+"""The import structure: no cycles between lburst modules or packages, and the COLMAP
+child process (with the pose metrics) free of torch, OpenCV and tqdm."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import lburst
+
+ROOT = Path(lburst.__file__).parent
+
+# A runtime cycle that is known and waits for its fix: the `simulate flight` command's
+# options live in night_flight.py, which calls flight_recording for --video/--dng, while
+# flight_recording renders through night_flight. Remove the entry when the command's
+# code moves out of the library module; the test fails if a listed cycle is gone.
+KNOWN_CYCLES = {frozenset({"lburst.scenes.flight_recording", "lburst.scenes.night_flight"})}
+
+
+def module_names() -> dict[str, Path]:
+    out = {}
+    for path in ROOT.rglob("*.py"):
+        parts = list(path.relative_to(ROOT.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+def _runtime_nodes(tree: ast.AST):
+    """Every node except the bodies of ``if TYPE_CHECKING:`` blocks (imports that never run)."""
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        yield node
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            stack.extend(node.orelse)
+            continue
+        stack.extend(ast.iter_child_nodes(node))
+
+
+def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """lburst modules that ``name`` imports anywhere it runs (module level or in functions)."""
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    found = set()
+    for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package[: len(package) - node.level + 1] + ([base] if base else []))
+            for alias in node.names:
+                sub = f"{base}.{alias.name}"
+                found.add(sub if sub in modules else base)
+    return {m for m in found if m in modules and m != name}
+
+
+def package_of(name: str) -> str:
+    """``lburst.sfm.colmap`` -> ``lburst.sfm``; a top-level module is its own unit."""
+    parts = name.split(".")
+    if len(parts) >= 2 and (ROOT / parts[1]).is_dir():
+        return ".".join(parts[:2])
+    return name
+
+
+def cycles(graph: dict[str, set[str]]) -> list[set[str]]:
+    """Strongly connected components with more than one node (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[set[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.add(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(component)
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    modules = module_names()
+    return {name: imports_of(name, path, modules) for name, path in modules.items()}
+
+
+def test_the_import_graph_is_read():
+    graph = import_graph()
+    assert "lburst.sfm.poses" in graph["lburst.sfm.metrics"]
+    assert "lburst.features" in graph["lburst.methods.merge"]
+    assert "lburst.sfm.colmap" in graph["lburst.sfm.reconstruct"]  # imported inside a function
+
+
+def test_no_two_modules_import_each_other():
+    found = [c for c in cycles(import_graph()) if frozenset(c) not in KNOWN_CYCLES]
+    assert not found, f"import cycles between modules: {[sorted(c) for c in found]}"
+
+
+def test_known_cycles_still_exist():
+    present = {frozenset(c) for c in cycles(import_graph())}
+    assert KNOWN_CYCLES <= present, f"fixed, remove from KNOWN_CYCLES: {KNOWN_CYCLES - present}"
+
+
+def test_no_two_packages_import_each_other():
+    packages: dict[str, set[str]] = {}
+    for name, deps in import_graph().items():
+        packages.setdefault(package_of(name), set()).update(
+            package_of(d) for d in deps if package_of(d) != package_of(name))
+    found = cycles(packages)
+    assert not found, f"import cycles between packages: {[sorted(c) for c in found]}"
+
+
+def test_colmap_child_and_poses_import_no_torch_opencv_or_tqdm():
+    code = ("import sys, lburst.sfm.colmap, lburst.sfm.poses\n"
+            "print(','.join(m for m in ('torch', 'cv2', 'tqdm', 'pycolmap', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"
+
+
+def test_import_lburst_and_its_methods_registry_is_light():
+    code = ("import sys, lburst, lburst.methods, lburst.features, lburst.extras\n"
+            "print(','.join(m for m in ('torch', 'pycolmap', 'matplotlib', 'skimage') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"
