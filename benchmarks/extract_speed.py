@@ -27,14 +27,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-
 PATHS = ("plain", "fast", "bf16", "onnx")
 
 
 def _make_burst(size: tuple[int, int], frames: int) -> np.ndarray:
-    import skimage.data
-
     import cv2
+    import skimage.data
 
     photo = cv2.resize(skimage.data.astronaut(), (size[1], size[0]), interpolation=cv2.INTER_LINEAR)
     from lburst.noise import GaussianNoise

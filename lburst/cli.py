@@ -53,15 +53,20 @@ def _words(argv: list[str]) -> tuple[str, ...] | None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from lburst.extras import MissingExtra
+
     argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser(_words(argv))
-    args = parser.parse_args(argv)
-    if not hasattr(args, "_module"):
-        parser.print_help()
-        return 2
-    module = importlib.import_module(args._module)
     try:
+        parser = build_parser(_words(argv))
+        args = parser.parse_args(argv)
+        if not hasattr(args, "_module"):
+            parser.print_help()
+            return 2
+        module = importlib.import_module(args._module)
         return int(module.main(args) or 0)
+    except MissingExtra as exc:  # an optional dependency: the message names the extra to install
+        print(f"lburst: {exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("interrupted; finished work is kept and a re-run resumes", file=sys.stderr)
         return 130

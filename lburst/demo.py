@@ -22,13 +22,10 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from lburst.io import atomic_path, load_burst  # noqa: E402
+from lburst.io import atomic_path, load_burst
+from lburst.viz import new_figure
 
 
 def lburst_spec(weights: str | None) -> str:
@@ -53,7 +50,8 @@ def plot_matches(image_a: np.ndarray, image_b: np.ndarray, kp_a: np.ndarray, kp_
     canvas = np.zeros((h, image_a.shape[1] + image_b.shape[1], 3), image_a.dtype)
     canvas[: image_a.shape[0], : image_a.shape[1]] = image_a
     canvas[: image_b.shape[0], image_a.shape[1] :] = image_b
-    fig, ax = plt.subplots(figsize=(12, 12 * h / canvas.shape[1] + 0.5))
+    fig = new_figure((12, 12 * h / canvas.shape[1] + 0.5))
+    ax = fig.subplots()
     ax.imshow(canvas)
     pick = np.random.default_rng(0).permutation(len(kp_a))[:max_lines]
     for i in pick:
@@ -63,7 +61,6 @@ def plot_matches(image_a: np.ndarray, image_b: np.ndarray, kp_a: np.ndarray, kp_
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
 
 
 def plot_trajectories(reference, results: dict, path: Path) -> None:
@@ -73,7 +70,8 @@ def plot_trajectories(reference, results: dict, path: Path) -> None:
     centres = reference.centers()
     names = list(centres)
     ref = np.array([centres[n] for n in names])
-    fig, ax = plt.subplots(figsize=(7, 6))
+    fig = new_figure((7, 6))
+    ax = fig.subplots()
     ax.plot(ref[:, 0], ref[:, 1], "k-o", ms=4, label="ground truth")
     for (label, result), marker in zip(results.items(), "sx^v"):
         common = [n for n in names if n in result.poses]
@@ -92,7 +90,6 @@ def plot_trajectories(reference, results: dict, path: Path) -> None:
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:

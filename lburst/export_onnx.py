@@ -14,9 +14,9 @@ import sys
 import warnings
 from pathlib import Path
 
-import numpy as np
 import torch
 
+from lburst.extras import require
 from lburst.fast import CoreModule, FastLBurstNet, pad_maps
 from lburst.io import atomic_path
 from lburst.model import CheckpointError, load_checkpoint
@@ -24,6 +24,8 @@ from lburst.model import CheckpointError, load_checkpoint
 
 def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Path:
     """Export the checkpoint's fast network to ``out`` (atomically)."""
+    for module in ("onnx", "onnxscript"):
+        require(module, "lburst export onnx")
     net, _ = load_checkpoint(checkpoint, "cpu")
     core = CoreModule(FastLBurstNet(net, tiled=False).eval()).eval()  # one graph for any size
     example = torch.randn(1, net.config.in_channels, 96, 128)
@@ -41,7 +43,7 @@ class OnnxRunner:
     """An ONNX Runtime session with the interface of :meth:`FastLBurstNet.forward`."""
 
     def __init__(self, path: str | Path, threads: int | None = None) -> None:
-        import onnxruntime as ort
+        ort = require("onnxruntime", "LBurst.from_onnx")
 
         path = Path(path)
         if not path.is_file():

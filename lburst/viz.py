@@ -4,13 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from lburst.extras import require
+from lburst.io import atomic_path
 
-from lburst.io import atomic_path  # noqa: E402
+
+def new_figure(figsize: tuple[float, float]):
+    """A matplotlib ``Figure`` that is not attached to pyplot, so no backend is chosen or
+    forced (``savefig`` renders PNG with Agg) and nothing needs closing."""
+    return require("matplotlib.figure", "plotting").Figure(figsize=figsize)
 
 
 def to_display(image: np.ndarray) -> np.ndarray:
@@ -38,8 +41,8 @@ def plot_keypoints_and_maps(
     if reliability is not None:
         panels.append(("reliability", reliability))
     h, w = image.shape[:2]
-    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels) * w / max(h, w) + 0.5, 5 * h / max(h, w) + 0.6))
-    axes = np.atleast_1d(axes)
+    fig = new_figure((5 * len(panels) * w / max(h, w) + 0.5, 5 * h / max(h, w) + 0.6))
+    axes = np.atleast_1d(fig.subplots(1, len(panels)))
     for ax, (name, data) in zip(axes, panels):
         if data is None:
             ax.imshow(to_display(image))
@@ -57,5 +60,4 @@ def plot_keypoints_and_maps(
     path = Path(path)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
-    plt.close(fig)
     return path

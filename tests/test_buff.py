@@ -8,12 +8,11 @@ import pytest
 from skimage import data
 
 from lburst.features import check_features
-from lburst.noise import GaussianNoise
-from lburst.simulate import simulate_burst
-from lburst.methods import create
+from lburst.methods import create, sift_describe
 from lburst.methods.buff import Buff, BuffConfig, remap
 from lburst.methods.buff_scale import cubic_weights
-from lburst.methods import sift_describe
+from lburst.noise import GaussianNoise
+from lburst.simulate import simulate_burst
 
 cv2.setNumThreads(1)
 

@@ -8,11 +8,11 @@ import pytest
 from skimage import data
 
 from lburst.features import check_features
-from lburst.noise import GaussianNoise
-from lburst.simulate import simulate_burst
 from lburst.methods import create
 from lburst.methods.align import estimate_shifts, fit_linear
 from lburst.methods.merge import MergeThen, merge_burst
+from lburst.noise import GaussianNoise
+from lburst.simulate import simulate_burst
 
 cv2.setNumThreads(1)
 VELOCITY = np.array([1.37, -0.62])

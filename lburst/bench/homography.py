@@ -29,6 +29,7 @@ same path are run again.
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import re
@@ -221,7 +222,7 @@ def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[
                 for i, image in enumerate(seq.images):
                     burst, motion = protocol_burst(image, name, i, level)
                     cache = out / "cache" / _slug(runner.key) / level.label / name / f"{i + 1}.npz"
-                    f, t = _cached(cache, lambda: runner(image, burst, motion))
+                    f, t = _cached(cache, functools.partial(runner, image, burst, motion))
                     feats.append(f)
                     times.append(t)
                     bar.update(1)
@@ -267,14 +268,12 @@ def markdown(results: dict) -> str:
 
 def plot_mma(results: dict, path: Path) -> None:
     """MMA against threshold, one panel per noise level, one line per method."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from lburst.viz import new_figure
 
     methods = results["methods"]
     levels = list(next(iter(methods.values())).keys())
-    fig, axes = plt.subplots(1, len(levels), figsize=(4.5 * len(levels), 4), squeeze=False)
+    fig = new_figure((4.5 * len(levels), 4))
+    axes = fig.subplots(1, len(levels), squeeze=False)
     for ax, level in zip(axes[0], levels):
         for spec in methods:
             ax.plot(THRESHOLDS, methods[spec][level]["summary"]["all"]["mma"], marker="o", ms=3, label=spec)
@@ -287,7 +286,6 @@ def plot_mma(results: dict, path: Path) -> None:
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:

@@ -13,9 +13,9 @@ from lburst.simulate import simulate_burst
 
 def default_photo():
     """A photo scikit-image ships (so the command runs with no data)."""
-    import skimage.data
+    from lburst.extras import require
 
-    return skimage.data.astronaut()
+    return require("skimage.data", "the default photo (give IMAGE instead)").astronaut()
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:

@@ -14,8 +14,8 @@ from typing import Literal
 
 import cv2
 import numpy as np
-from skimage.registration import phase_cross_correlation
 
+from lburst.extras import require
 from lburst.methods.frames import gray_unit, time_offsets
 
 Method = Literal["phase", "ecc"]
@@ -28,8 +28,9 @@ def phase_shift(reference: np.ndarray, image: np.ndarray, window: np.ndarray, up
     Phase correlation of the Hann-windowed images; the peak is refined to
     ``1 / upsample`` px by a matrix-multiply DFT upsampling around it (scikit-image).
     """
-    shift_yx, _, _ = phase_cross_correlation(reference * window, image * window, upsample_factor=upsample,
-                                             normalization=None)
+    registration = require("skimage.registration", "phase-correlation alignment (merge+...)")
+    shift_yx, _, _ = registration.phase_cross_correlation(reference * window, image * window,
+                                                          upsample_factor=upsample, normalization=None)
     return -np.asarray(shift_yx[::-1], np.float64)
 
 

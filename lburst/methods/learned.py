@@ -8,9 +8,9 @@ import numpy as np
 
 from lburst.extract import LBurst
 from lburst.features import Features
-from lburst.model import autocast_dtype
 from lburst.methods import register
 from lburst.methods.options import as_bool
+from lburst.model import autocast_dtype
 
 DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "r2d2": "lburst-b1"}
 

@@ -63,8 +63,8 @@ def orientations(sample: Sampler, centres: np.ndarray, sigmas: np.ndarray) -> tu
     left, right = np.roll(smooth, 1, axis=1), np.roll(smooth, -1, axis=1)
     peak = (smooth > left) & (smooth > right) & (smooth >= ORI_PEAK_RATIO * smooth.max(1, keepdims=True))
     index, b = np.nonzero(peak)
-    l, m, rr = left[index, b], smooth[index, b], right[index, b]
-    offset = 0.5 * (l - rr) / (l - 2 * m + rr)
+    lo, m, rr = left[index, b], smooth[index, b], right[index, b]
+    offset = 0.5 * (lo - rr) / (lo - 2 * m + rr)
     angle = ((b + offset) * (2 * np.pi / ORI_BINS)) % (2 * np.pi)
     return index, angle.astype(np.float32)
 

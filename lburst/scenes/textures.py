@@ -10,7 +10,8 @@ import functools
 
 import cv2
 import numpy as np
-import skimage.data
+
+from lburst.extras import require
 
 # scikit-image sample photos (bundled with the package, no download); ``cat`` is ``chelsea``
 PHOTOS = (
@@ -19,16 +20,16 @@ PHOTOS = (
 )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def load_photo(name: str) -> np.ndarray:
     """A scikit-image sample photo as uint8 (H, W, 3) (cached: do not modify it)."""
-    img = np.asarray(getattr(skimage.data, name)())
+    img = np.asarray(getattr(require("skimage.data", "the scenes' photo textures"), name)())
     if img.ndim == 2:
         img = np.repeat(img[..., None], 3, axis=-1)
     return np.ascontiguousarray(img[..., :3].astype(np.uint8))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def photo_patches(names: tuple[str, ...] = PHOTOS, size: int = 256, min_std: float = 25.0) -> tuple[np.ndarray, ...]:
     """Non-overlapping ``size x size`` uint8 (size, size, 3) patches of the photos at their
     own resolution, leaving out flat ones (grey-level std below ``min_std``).  Distinct

@@ -36,8 +36,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from lburst.io import file_sha1
-from lburst.sfm.reference import Reference
 from lburst.sfm.poses import path_length, trajectory_errors
+from lburst.sfm.reference import Reference
 
 
 class Reconstruction(Protocol):

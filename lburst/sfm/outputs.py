@@ -69,8 +69,8 @@ def _plot_trajectory(result: "ReconstructionResult", path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from lburst.sfm.reference import Reference
     from lburst.sfm.poses import umeyama
+    from lburst.sfm.reference import Reference
 
     est = {n: -np.asarray(R).T @ np.asarray(t) for n, (R, t) in result.poses.items()}
     ref_path = Path(result.out_dir) / "reference.json"

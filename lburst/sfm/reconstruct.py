@@ -34,7 +34,7 @@ from lburst.features import Features, check_features
 from lburst.io import atomic_path, write_image
 from lburst.match import mutual_nearest_neighbours
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
-from lburst.sfm.scene import Scene, SceneError, SceneItem, exif_source, list_scene, load_item, reference_cameras
+from lburst.sfm.scene import Scene, SceneError, exif_source, list_scene, load_item, reference_cameras
 from lburst.sources import is_recording
 
 AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto': exhaustive up to this many images, else sequential

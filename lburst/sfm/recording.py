@@ -21,8 +21,8 @@ from typing import Iterator
 import numpy as np
 
 from lburst.io import atomic_path
-from lburst.sfm.reference import Reference
 from lburst.sfm.poses import path_length
+from lburst.sfm.reference import Reference
 from lburst.sfm.scene import Scene, SceneItem
 from lburst.sources import Keyframe, Recording
 from lburst.tum import lookup, read_tum

@@ -27,7 +27,6 @@ import numpy as np
 from lburst.io import atomic_path
 
 
-
 @dataclass
 class Reference:
     """Reference cameras of a scene.

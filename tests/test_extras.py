@@ -1,0 +1,98 @@
+"""Optional dependencies: absent extras give a one-line install hint, and nothing is
+imported (or a matplotlib backend chosen) before it is used."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from lburst.extras import LazyModule, MissingExtra, require
+
+
+def run_python(code: str, block: tuple[str, ...] = ()) -> subprocess.CompletedProcess:
+    """Run ``code`` in a fresh interpreter where the modules ``block`` cannot be imported."""
+    prelude = "import sys\n" + "".join(f"sys.modules[{name!r}] = None\n" for name in block)
+    return subprocess.run([sys.executable, "-c", prelude + code], capture_output=True, text=True)
+
+
+def test_require_names_the_extra_of_a_missing_package(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pycolmap", None)
+    with pytest.raises(MissingExtra, match=r"reconstruction needs pycolmap: pip install 'lburst\[sfm\]'"):
+        require("pycolmap", "reconstruction")
+
+
+def test_require_does_not_hide_an_unknown_missing_module():
+    with pytest.raises(ModuleNotFoundError) as info:
+        require("lburst_no_such_module")
+    assert not isinstance(info.value, MissingExtra)
+
+
+def test_lazy_module_imports_on_first_use():
+    lazy = LazyModule("json")
+    assert "not loaded" in repr(lazy)
+    assert lazy.dumps([1]) == "[1]"
+    assert "loaded" in repr(lazy) and "not" not in repr(lazy)
+
+
+def test_reconstruction_without_pycolmap_says_what_to_install():
+    code = ("from lburst.sfm.colmap import default_camera, exif_camera\n"
+            "print(default_camera(640, 480)['model'])\n"
+            "exif_camera('x.jpg')\n")
+    out = run_python(code, block=("pycolmap",))
+    assert out.returncode != 0
+    assert out.stdout.strip() == "SIMPLE_RADIAL"  # what needs no COLMAP still works
+    assert "pip install 'lburst[sfm]'" in out.stderr.strip().splitlines()[-1]
+
+
+def test_extraction_and_the_registry_work_without_the_extras():
+    code = ("import numpy as np, lburst\n"
+            "burst = np.random.default_rng(0).integers(0, 255, (3, 64, 80, 3), dtype=np.uint8)\n"
+            "print(len(lburst.methods.available()) > 3, lburst.methods.create('sift')(burst)['descriptors'].shape[1])\n")
+    out = run_python(code, block=("pycolmap", "skimage", "matplotlib", "onnx", "onnxruntime", "onnxscript"))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True", "128"]
+
+
+def test_merge_without_scikit_image_says_what_to_install():
+    code = ("import numpy as np, lburst\n"
+            "burst = np.zeros((3, 32, 32, 3), np.uint8)\n"
+            "lburst.methods.create('merge+sift')(burst)\n")
+    out = run_python(code, block=("skimage",))
+    assert out.returncode != 0
+    assert "pip install 'lburst[sfm]'" in out.stderr.strip().splitlines()[-1]
+
+
+def test_cli_prints_one_line_for_a_missing_extra(tmp_path):
+    out_dir = str(tmp_path / "b")
+    code = f"from lburst.cli import main\nraise SystemExit(main(['simulate', 'burst', '--out', {out_dir!r}]))\n"
+    out = run_python(code, block=("skimage",))
+    assert out.returncode == 2
+    assert out.stderr.strip() == ("lburst: the default photo (give IMAGE instead) needs scikit-image: "
+                                  "pip install 'lburst[sfm]'")
+
+
+def test_plotting_chooses_no_backend(tmp_path):
+    png = str(tmp_path / "k.png")
+    code = ("import numpy as np\n"
+            "import lburst.viz, lburst.demo\n"
+            "assert 'matplotlib' not in sys.modules\n"
+            "img = np.zeros((40, 60, 3), np.uint8)\n"
+            f"lburst.viz.plot_keypoints_and_maps(img, np.array([[5.0, 6.0]]), np.zeros((40, 60)), None, {png!r})\n"
+            "assert 'matplotlib.pyplot' not in sys.modules\n"
+            "print('ok')\n")
+    out = run_python(code)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "k.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plots_need_matplotlib_only_when_drawn(tmp_path):
+    pytest.importorskip("matplotlib")
+    from lburst.demo import plot_matches
+
+    img = np.zeros((30, 40, 3), np.uint8)
+    kp = np.array([[3.0, 4.0], [10.0, 12.0]])
+    plot_matches(img, img, kp, kp, tmp_path / "m.png", "test")
+    assert (tmp_path / "m.png").stat().st_size > 0
