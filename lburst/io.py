@@ -219,12 +219,18 @@ def save_burst(burst: np.ndarray, folder: str | Path) -> list[Path]:
     return paths
 
 
-def write_features_npz(path: str | Path, features: dict[str, np.ndarray], image_size: tuple[int, int]) -> Path:
+def write_features_npz(path: str | Path, features: dict[str, np.ndarray], image_size: tuple[int, int],
+                       meta: dict | None = None) -> Path:
     """``.npz`` with ``keypoints`` (K, 3) x, y, scale (pixel centres at integer coordinates),
-    ``descriptors`` (K, D), ``scores`` (K,) and ``imsize`` (W, H); written atomically."""
+    ``descriptors`` (K, D), ``scores`` (K,) and ``imsize`` (W, H), and ``meta`` as a JSON
+    string ``_meta`` (see :mod:`lburst.store`); written atomically."""
+    import json
+
     path = Path(path)
     keypoints = np.concatenate([features["keypoints"], features["scales"][:, None]], 1).astype(np.float32)
     extra = {k: v for k, v in features.items() if k not in ("keypoints", "scales", "descriptors", "scores")}
+    if meta is not None:
+        extra["_meta"] = np.array(json.dumps(meta, ensure_ascii=True))
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez(f, keypoints=keypoints, descriptors=features["descriptors"], scores=features["scores"],
                  imsize=np.array(image_size, np.int32), **extra)
@@ -234,7 +240,7 @@ def write_features_npz(path: str | Path, features: dict[str, np.ndarray], image_
 def read_features_npz(path: str | Path) -> dict[str, np.ndarray]:
     """Features written by :func:`write_features_npz` in the features-dict layout (plus ``imsize``)."""
     with np.load(path) as data:
-        out = {k: data[k] for k in data.files}
+        out = {k: data[k] for k in data.files if not k.startswith("_")}
     kp = out.pop("keypoints")
     out["keypoints"], out["scales"] = kp[:, :2].copy(), kp[:, 2].copy()
     return out

@@ -26,8 +26,10 @@ def test_extract_writes_features_resumes_and_reports_bad_bursts(tmp_path, capsys
     assert 0 < len(feats["keypoints"]) <= 300
     assert np.all(feats["keypoints"][:, 0] <= 191) and np.all(feats["keypoints"][:, 1] <= 143)
     assert (out / "features.h5").is_file()
-    assert main(["extract", str(good), "--out", str(out)]) == 0  # done already: skipped
+    assert main(["extract", str(good), "--out", str(out), "--top-k", "300"]) == 0  # done already: skipped
     assert "0 bursts extracted" in capsys.readouterr().out
+    assert main(["extract", str(good), "--out", str(out), "--top-k", "100"]) == 0  # other options: recomputed
+    assert "1 bursts extracted" in capsys.readouterr().out and len(np.load(out / "burst_01.npz")["keypoints"]) <= 100
 
 
 def test_extract_in_bf16_finds_nearly_the_fp32_keypoints(tmp_path):
@@ -38,3 +40,60 @@ def test_extract_in_bf16_finds_nearly_the_fp32_keypoints(tmp_path):
     dist = np.linalg.norm(bf16[:, None] - fp32[None], axis=-1).min(axis=1)
     assert len(bf16) > 0.9 * len(fp32) and np.mean(dist <= 1) > 0.9
     assert not np.array_equal(bf16, fp32)  # the option reached the network
+
+
+def _small_burst(folder, seed=0, n=3):
+    """A 3-frame burst of a 160x120 crop of a photo (``seed`` moves the crop)."""
+    crop = skimage.data.astronaut()[40 * seed : 40 * seed + 240, 100 : 420]
+    image = cv2.resize(crop, (160, 120), interpolation=cv2.INTER_AREA)
+    save_burst(np.stack([image] * n), folder)
+    return folder
+
+
+def test_two_bursts_with_one_name_are_not_taken_for_done(tmp_path, capsys):
+    a, b = _small_burst(tmp_path / "sA" / "b0", 0), _small_burst(tmp_path / "sB" / "b0", 1)
+    out = tmp_path / "out"
+    assert main(["extract", str(a), str(b), "--out", str(out), "--method", "sift"]) == 1
+    err = capsys.readouterr().err
+    assert "same output name 'b0'" in err and str(b) in err
+    first = np.load(out / "b0.npz")["keypoints"]
+    assert main(["extract", str(b), "--out", str(out), "--method", "sift"]) == 1  # a later run: refused too
+    assert "holds the features of another burst" in capsys.readouterr().err
+    np.testing.assert_array_equal(np.load(out / "b0.npz")["keypoints"], first)
+
+
+def test_another_method_or_changed_frames_are_computed_again(tmp_path, capsys):
+    burst, out = _small_burst(tmp_path / "b0"), tmp_path / "out"
+    assert main(["extract", str(burst), "--out", str(out), "--method", "sift"]) == 0
+    sift = np.load(out / "b0.npz")["descriptors"]
+    assert main(["extract", str(burst), "--out", str(out), "--method", "orb"]) == 0
+    assert "1 bursts extracted" in capsys.readouterr().out
+    assert np.load(out / "b0.npz")["descriptors"].dtype == np.uint8 != sift.dtype
+    _small_burst(burst, seed=5)  # the same burst, new frames
+    before = np.load(out / "b0.npz")["keypoints"]
+    assert main(["extract", str(burst), "--out", str(out), "--method", "orb"]) == 0
+    assert "1 bursts extracted" in capsys.readouterr().out
+    assert not np.array_equal(np.load(out / "b0.npz")["keypoints"], before)
+
+
+def test_features_h5_holds_every_finished_burst(tmp_path):
+    import h5py
+
+    bursts = [str(_small_burst(tmp_path / f"b{i}", i)) for i in range(2)]
+    out = tmp_path / "out"
+    assert main(["extract", bursts[0], "--out", str(out), "--method", "sift"]) == 0
+    assert main(["extract", *bursts, "--out", str(out), "--method", "sift", "--h5"]) == 0  # --h5 added later
+    with h5py.File(out / "features.h5") as f:
+        assert sorted(f) == ["b0", "b1"]
+        np.testing.assert_array_equal(f["b0/keypoints"][()], np.load(out / "b0.npz")["keypoints"][:, :2])
+    (out / "features.h5").write_bytes(b"corrupt")
+    assert main(["extract", *bursts, "--out", str(out), "--method", "sift", "--h5"]) == 0
+    with h5py.File(out / "features.h5") as f:
+        assert sorted(f) == ["b0", "b1"]
+
+
+def test_extract_dot_names_the_output_after_the_folder(tmp_path, monkeypatch):
+    burst = _small_burst(tmp_path / "here")
+    monkeypatch.chdir(burst)
+    assert main(["extract", ".", "--out", str(tmp_path / "out"), "--method", "sift"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["here.npz"]

@@ -1,8 +1,13 @@
 """``lburst extract``: features of many bursts, one ``.npz`` each (and an hloc ``features.h5``).
 
 Each BURST is a folder of frames, an image or a video (see :func:`lburst.io.load_burst`).
-Finished bursts are skipped on a re-run, every file is written atomically, and a
-burst that fails is reported and skipped: the exit code is 1 if any failed.
+Each ``.npz`` records what made it (:mod:`lburst.store`: the method spec, its weights'
+SHA-1 and options, the burst's path and content SHA-1); a re-run skips a burst only when
+its file holds the same burst by the same method, and recomputes it otherwise.  A name
+that two different bursts map to (``a/b0`` and ``c/b0``) is refused for the second.
+``features.h5`` is written at the end from the ``.npz`` of every finished burst of the
+run.  Every file is written atomically, and a burst that fails is reported and
+skipped: the exit code is 1 if any failed.
 """
 
 from __future__ import annotations
@@ -14,15 +19,21 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from lburst.io import BurstError, load_burst, write_features_h5, write_features_npz
+from lburst import store
+from lburst.io import BurstError, atomic_path, load_burst, read_features_npz, write_features_h5
 from lburst.methods import create
 from lburst.model import AUTOCAST_DTYPES, CheckpointError
 from lburst.sources import add_recording_arguments, is_recording, open_recording, recording_options
 
 
 def burst_name(path: Path) -> str:
-    """A burst's name in outputs: the folder or file name without suffix."""
-    return path.stem if path.is_file() else path.name
+    """A burst's name in outputs: the folder or file name without suffix (``.`` is the
+    current folder's name)."""
+    path = Path(os.path.abspath(path))
+    name = path.stem if path.is_file() else path.name
+    if not name or name.startswith("."):
+        raise BurstError(f"{path}: no name to give its output (a hidden or root path)")
+    return name
 
 
 def method_spec(method: str | None, weights: str | None, frame_order: str | None = None) -> str:
@@ -58,28 +69,66 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     add_recording_arguments(p)
 
 
-def extract_recording(path: Path, extractor, args: argparse.Namespace) -> tuple[int, int, str | None]:
+def extract_recording(path: Path, extractor, args: argparse.Namespace, method: dict,
+                      finished: list[tuple[str, Path]]) -> tuple[int, int, str | None]:
     """Features of every keyframe burst of a recording, one ``.npz`` each in ``OUT/<recording>/``;
-    returns (extracted, already done, why reading stopped or ``None``).  Keyframes finished
-    before a bad frame are kept."""
+    returns (extracted, already done, why reading stopped or ``None``) and appends the
+    finished keyframes to ``finished``.  Keyframes finished before a bad frame are kept."""
+    from lburst.sfm.recording import cache_key
+
     folder = args.out / burst_name(path)
     done = skipped = 0
     try:
-        for keyframe, burst in open_recording(path, recording_options(args)).bursts():
+        recording = open_recording(path, recording_options(args))
+        content = cache_key(recording)
+        for keyframe, burst in recording.bursts():
             target = folder / f"{keyframe.name}.npz"
-            if target.exists() and not args.overwrite:
+            key = store.burst_key(method, path, f"{content}|{keyframe.name}")
+            if not args.overwrite and store.load(target, key) is not None:
                 skipped += 1
-                continue
-            features = extractor(burst)
-            size = (burst.shape[2], burst.shape[1])
-            if args.h5:
-                write_features_h5(args.out / "features.h5", f"{burst_name(path)}/{keyframe.name}", features, size)
-            folder.mkdir(parents=True, exist_ok=True)
-            write_features_npz(target, features, size)
-            done += 1
-    except BurstError as exc:
+            else:
+                features = extractor(burst)
+                folder.mkdir(parents=True, exist_ok=True)
+                store.save(target, features, (burst.shape[2], burst.shape[1]), key)
+                done += 1
+            finished.append((f"{burst_name(path)}/{keyframe.name}", target))
+    except (BurstError, ValueError, OSError) as exc:
         return done, skipped, str(exc)
     return done, skipped, None
+
+
+def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
+    """hloc's ``features.h5`` from finished ``.npz`` files (group name, file), atomically."""
+    with atomic_path(path) as tmp:
+        tmp.unlink()  # h5py appends to an existing file; start from none
+        for group, npz in finished:
+            features = read_features_npz(npz)
+            write_features_h5(tmp, group, features, tuple(int(v) for v in features["imsize"]))
+
+
+def extract_burst(path: Path, extractor, args: argparse.Namespace, method: dict,
+                  names: dict[str, Path]) -> tuple[str, Path, bool]:
+    """Features of one burst into ``OUT/<name>.npz``: (name, file, whether computed now).
+    ``BurstError`` when the name is taken by another burst (in this run or on disk)."""
+    if not path.exists():
+        raise BurstError(f"{path}: no such file or folder")
+    name = burst_name(path)
+    target = args.out / f"{name}.npz"
+    here = Path(os.path.abspath(path))
+    if names.setdefault(name, here) != here:
+        raise BurstError(f"{path}: same output name {name!r} as {names[name]} in this run; "
+                         f"extract one of them into another --out")
+    key = store.burst_key(method, path)
+    if target.exists() and not args.overwrite:
+        if store.load(target, key) is not None:
+            return name, target, False
+        meta = store.read_meta(target)
+        if not store.same_source(meta, key):
+            raise BurstError(f"{path}: {target} holds the features of another burst with the same name "
+                             f"({meta['key']['source']['path']}); use another --out, or --overwrite to replace them")
+    burst = load_burst(path)
+    store.save(target, extractor(burst), (burst.shape[2], burst.shape[1]), key)
+    return name, target, True
 
 
 def main(args: argparse.Namespace) -> int:
@@ -97,7 +146,10 @@ def main(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
+    method = store.method_key(spec, **{k: v for k, v in options.items() if k != "device"})
     failed: list[tuple[Path, str]] = []
+    finished: list[tuple[str, Path]] = []  # (features.h5 group, .npz) of every finished burst
+    names: dict[str, Path] = {}
     done = 0
     try:
         recording_options(args)
@@ -106,7 +158,7 @@ def main(args: argparse.Namespace) -> int:
         return 2
     for path in tqdm(args.bursts, desc=f"extract {spec}", unit="burst"):
         if is_recording(path) and (path.is_dir() or args.every is not None):
-            new, old, problem = extract_recording(path, extractor, args)
+            new, old, problem = extract_recording(path, extractor, args, method, finished)
             tqdm.write(f"{path}: {new} keyframes extracted, {old} already done")
             done += 1
             if problem:
@@ -114,22 +166,16 @@ def main(args: argparse.Namespace) -> int:
                 tqdm.write(f"stopped {path}: {problem}", file=sys.stderr)
                 done -= 1
             continue
-        name = burst_name(path)
-        target = args.out / f"{name}.npz"
-        if target.exists() and not args.overwrite:
-            continue
         try:
-            burst = load_burst(path)
-            features = extractor(burst)
-        except (BurstError, ValueError, OSError) as exc:
+            name, target, computed = extract_burst(path, extractor, args, method, names)
+        except (BurstError, ValueError, OSError, RuntimeError) as exc:
             failed.append((path, str(exc)))
             tqdm.write(f"skipped {path}: {exc}", file=sys.stderr)
             continue
-        size = (burst.shape[2], burst.shape[1])
-        if args.h5:
-            write_features_h5(args.out / "features.h5", name, features, size)
-        write_features_npz(target, features, size)  # last: its presence marks the burst done
-        done += 1
+        finished.append((name, target))
+        done += computed
+    if args.h5:
+        write_h5(args.out / "features.h5", finished)
     print(f"{done} bursts extracted to {args.out}, {len(args.bursts) - done - len(failed)} already done, "
           f"{len(failed)} failed")
     for path, why in failed:

@@ -1,0 +1,102 @@
+"""The features store: one ``.npz`` per burst that records what made it.
+
+Used by ``lburst extract`` and ``lburst reconstruct`` (and so by the reconstruction
+benchmark).  Each file has the layout of :func:`lburst.io.write_features_npz` plus
+``_meta``, a JSON object whose ``key`` says what the features depend on:
+
+- ``method``: the method spec and the SHA-1 of the weights it loads
+  (:func:`lburst.methods.learned.results_key`), so retrained weights are not served
+  old features, plus the options given besides the spec (``top_k``, ``precision``);
+- ``source``: the burst's absolute path and the SHA-1 of its content
+  (:func:`content_sha1`), so changed frames are computed again.
+
+Stored features are used only when the stored key equals the wanted one
+(:func:`load`).  :func:`same_source` tells a stale file of the same burst (to replace)
+from the features of another burst that has the same name (a collision).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lburst.features import Features, check_features
+from lburst.io import read_features_npz, write_features_npz
+
+
+def content_sha1(path: str | Path) -> str:
+    """SHA-1 over a burst's bytes: a file's, or a folder's non-hidden files (names and bytes, sorted)."""
+    path = Path(path)
+    files = [path] if not path.is_dir() else sorted(
+        (p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")), key=lambda p: p.name)
+    digest = hashlib.sha1()
+    for file in files:
+        digest.update(os.fsencode(file.name) + b"\0")
+        with open(file, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        digest.update(b"\0")
+    return digest.hexdigest()
+
+
+def method_key(spec: str, **options: Any) -> dict[str, Any]:
+    """The ``method`` part of a key: the spec with its weights' SHA-1, and the other options."""
+    from lburst.methods.learned import results_key
+
+    return {"spec": results_key(spec), "options": {k: str(v) for k, v in sorted(options.items())}}
+
+
+def burst_key(method: dict[str, Any], source: str | Path, content: str | None = None) -> dict[str, Any]:
+    """The key of one burst's features: ``method`` (:func:`method_key`) on ``source``."""
+    source = Path(source)
+    return {"method": method, "source": {"path": os.fsdecode(os.path.abspath(source)),
+                                         "sha1": content or content_sha1(source)}}
+
+
+def _canonical(value: Any) -> str:
+    return json.dumps(value, sort_keys=True)
+
+
+def read_meta(path: str | Path) -> dict[str, Any] | None:
+    """The ``_meta`` of a stored file, or ``None`` (missing, unreadable, or written without one)."""
+    try:
+        with np.load(path) as data:
+            return json.loads(str(data["_meta"])) if "_meta" in data.files else None
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+
+
+def load(path: str | Path, key: Any) -> tuple[Features, tuple[int, int], dict[str, Any]] | None:
+    """Features, image size (W, H) and ``_meta`` stored under ``key`` at ``path``; ``None`` when
+    the file is missing, unreadable or holds another key."""
+    meta = read_meta(path)
+    if meta is None or _canonical(meta.get("key")) != _canonical(key):
+        return None
+    try:
+        features = read_features_npz(path)
+        size = tuple(int(v) for v in features.pop("imsize"))
+        features = {k: v for k, v in features.items() if not k.startswith("_")}
+        return check_features(features), size, meta
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+
+
+def save(path: str | Path, features: Features, image_size: tuple[int, int], key: Any, **info: Any) -> Path:
+    """Store ``features`` of an image of ``image_size`` (W, H) under ``key`` (and ``info``), atomically."""
+    return write_features_npz(path, features, image_size, meta={"key": key, **info})
+
+
+def same_source(meta: dict[str, Any] | None, key: dict[str, Any]) -> bool:
+    """True if the file with ``meta`` holds (possibly stale) features of the burst of ``key``:
+    the same path, or the same content.  A file without a key counts as the same."""
+    try:
+        old = meta["key"]["source"]
+    except (TypeError, KeyError):
+        return True
+    new = key["source"]
+    return old.get("path") == new["path"] or old.get("sha1") == new["sha1"]
