@@ -11,6 +11,7 @@ a level resized to ``w x h`` back as ``x * W / w``, which is off by
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
@@ -54,6 +55,52 @@ class MultiScaleConfig:
     published_coordinates: bool = False
     fast: bool = True
     precision: str = "fp32"
+
+    def __post_init__(self) -> None:
+        """``ValueError`` naming the field for any value outside its range (every use of
+        the settings goes through here, so no loop below can run away)."""
+        from lburst.model import autocast_dtype
+
+        for name in ("min_size", "max_size"):
+            value = getattr(self, name)
+            if not _is_int(value) or value < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        if self.max_size < self.min_size:
+            raise ValueError(f"max_size {self.max_size} is below min_size {self.min_size}")
+        if not _is_real(self.scale_factor) or not 1 < self.scale_factor < float("inf"):
+            raise ValueError(f"scale_factor must be a number > 1 (the ratio of consecutive levels), "
+                             f"got {self.scale_factor!r}")
+        if not (_is_real(self.min_scale) and _is_real(self.max_scale) and 0 <= self.min_scale <= self.max_scale
+                and self.max_scale > 0 and self.max_scale < float("inf")):
+            raise ValueError(f"scales must satisfy 0 <= min_scale <= max_scale, max_scale > 0; "
+                             f"got {self.min_scale!r}, {self.max_scale!r}")
+        for name in ("rel_thr", "rep_thr"):
+            value = getattr(self, name)
+            if not _is_real(value) or not 0 <= value <= 1:
+                raise ValueError(f"{name} must be in [0, 1], got {value!r}")
+        if self.top_k is not None and (not _is_int(self.top_k) or self.top_k < 0):
+            raise ValueError(f"top_k must be an integer >= 0 or None, got {self.top_k!r}")
+        for name in ("published_coordinates", "fast"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        autocast_dtype(self.precision)
+        levels = 1 + math.log(self.max_size / self.min_size) / math.log(self.scale_factor)
+        if levels > MAX_LEVELS:
+            raise ValueError(f"scale_factor {self.scale_factor} between max_size {self.max_size} and min_size "
+                             f"{self.min_size} makes {levels:.0f} pyramid levels (at most {MAX_LEVELS})")
+
+
+MAX_LEVELS = 64  # pyramid levels of one extraction (the paper's settings make 9)
+MIN_SIDE = 8  # pixels: images and pyramid levels smaller than this are not used
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) \
+        and math.isfinite(value)
 
 
 def frame_permutation(n: int, order: str) -> list[int]:
@@ -195,6 +242,8 @@ class LBurst:
 
     def _extract(self, x: torch.Tensor, cfg: MultiScaleConfig) -> Features:
         height, width = x.shape[-2:]
+        if min(height, width) < MIN_SIDE:
+            raise ValueError(f"a {width}x{height} image is too small for features (at least {MIN_SIDE} px a side)")
         if cfg.fast and self.net is not None:  # channels-last once: each level is resized in that layout
             x = x.contiguous(memory_format=torch.channels_last)
         long_side = max(height, width)
@@ -224,6 +273,8 @@ class LBurst:
                 scales.append(torch.full((len(y),), 32 / s, device=x.device))
                 scores.append(rep[0, 0, y, xx] * rel[0, 0, y, xx])
             s /= cfg.scale_factor
+            if min(height, width) * s < MIN_SIDE:
+                break
             if s + 0.001 >= lowest:  # a next level: resize the last one
                 size = (round(height * s), round(width * s))
                 x = F.interpolate(x, size, mode="bilinear", align_corners=False)

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from lburst.extract import LBurst
+from lburst.extract import LBurst, MultiScaleConfig
 from lburst.features import Features
 from lburst.methods import register
 from lburst.methods.options import as_bool
@@ -49,6 +50,7 @@ class LearnedExtractor:
         self.model = model
         self.top_k = top_k
         self.options = options
+        replace(MultiScaleConfig(), top_k=top_k, **options)  # ValueError now for a bad option, not per burst
         self.name = "lburst"
 
     def __call__(self, burst: np.ndarray) -> Features:
