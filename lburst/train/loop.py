@@ -368,6 +368,8 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-budget", type=float, help="stop (resumably) after this many seconds")
     p.add_argument("--workers", type=int)
     p.add_argument("--threads", type=int, help="torch threads")
+    p.add_argument("--checkpoint-every", type=float, metavar="SECONDS",
+                   help="write the resumable last.pt every this many seconds (presets: 300, gpu 60)")
     p.add_argument("--tensorboard", action="store_true", help="also log the losses for TensorBoard (RUN/tensorboard)")
     p.add_argument("--snapshot-every", type=int, help="keep the weights every this many steps (snapshots/)")
     p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
@@ -387,7 +389,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
                  "time_budget_s": args.time_budget, "workers": args.workers, "threads": args.threads,
                  "seed": args.seed, "precision": args.precision, "snapshot_every": args.snapshot_every,
                  "tensorboard": args.tensorboard or None, "rel_logit_weight": args.rel_logit_weight,
-                 "distill_weight": args.distill_weight, "init": args.init}
+                 "distill_weight": args.distill_weight, "init": args.init,
+                 "checkpoint_every_s": args.checkpoint_every}
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
     if args.frames is not None:
