@@ -146,6 +146,21 @@ class LBurstNet(nn.Module):
         return out
 
 
+FLOAT_TOLERANCE = 1e-3  # float bursts may stray this far outside [0, 1] (rounding)
+
+
+def check_float_burst(burst: np.ndarray) -> None:
+    """``ValueError`` for a float burst with NaN or inf, or with values outside ``[0, 1]``
+    (a 0..255 float burst would give no keypoints)."""
+    finite = np.isfinite(burst)
+    if not finite.all():
+        raise ValueError(f"the burst holds {burst.size - int(finite.sum())} NaN or infinite values")
+    low, high = float(burst.min(initial=0.0)), float(burst.max(initial=0.0))
+    if low < -FLOAT_TOLERANCE or high > 1 + FLOAT_TOLERANCE:
+        hint = " (it looks like 0..255: divide by 255, or pass uint8)" if high > 2 else ""
+        raise ValueError(f"a float burst must be in [0, 1], this one spans [{low:g}, {high:g}]{hint}")
+
+
 def normalize_burst(burst: np.ndarray, device: torch.device | str = "cpu") -> torch.Tensor:
     """Turn a burst ``(N, H, W, 3)`` uint8/uint16/float array into the net's input.
 
@@ -161,6 +176,7 @@ def normalize_burst(burst: np.ndarray, device: torch.device | str = "cpu") -> to
         scale = 1 / 65535.0
     elif np.issubdtype(burst.dtype, np.floating):
         scale = 1.0
+        check_float_burst(burst)
     else:
         raise ValueError(f"unsupported burst dtype {burst.dtype}: use uint8, uint16 or float in [0, 1]")
     x = torch.from_numpy(np.ascontiguousarray(burst)).to(device)
