@@ -24,7 +24,7 @@ _EXPORTS = {
     "save_burst": "lburst.io",
     "simulate_burst": "lburst.simulate",
 }
-_MODULES = ("methods", "noise", "simulate", "io", "match", "model", "extract")
+_MODULES = ("methods", "matching", "noise", "simulate", "io", "match", "model", "extract")
 
 __all__ = sorted(_EXPORTS) + list(_MODULES)
 

@@ -12,6 +12,7 @@ import sys
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("extract",), "lburst.commands.extract", "features of bursts to .npz (and hloc features.h5)"),
     (("show",), "lburst.commands.show", "picture of a burst's keypoints and confidence maps"),
+    (("methods",), "lburst.commands.methods", "feature methods and matchers, with their options and defaults"),
     (("simulate", "burst"), "lburst.commands.simulate", "a low-light burst from one photo"),
     (("simulate", "scene"), "lburst.scenes.photo_scene", "a low-light burst scene from a multi-view photo set"),
     (("simulate", "sequences"), "lburst.bench.validation", "HPatches-style homography sequences from photos"),

@@ -93,6 +93,8 @@ def plot_trajectories(reference, results: dict, path: Path) -> None:
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
+    from lburst.matching import add_matcher_argument
+
     p.add_argument("--out", type=Path, default=Path("outputs/demo"), help="report folder")
     p.add_argument("--weights", help="LBurst checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
     p.add_argument("--noise", default="lowlight:moonless", help="noise of the flight (lburst.noise spec)")
@@ -100,6 +102,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--overlap", type=int, default=4, help="match each burst with this many next ones")
     p.add_argument("--methods", nargs="+", help="methods to compare (default: lburst and sift)")
+    add_matcher_argument(p)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -126,7 +129,7 @@ def main(args: argparse.Namespace) -> int:
         # the drone's camera is calibrated: both methods get the true intrinsics, fixed, and
         # sequential pairs along the trajectory
         result = reconstruct_scene(out / "scene", spec, out / label, camera="reference", fix_intrinsics=True,
-                                   pairs="sequential", overlap=args.overlap)
+                                   pairs="sequential", overlap=args.overlap, matcher=args.matcher)
         results[label] = result
         rows.append({"method": label, "scene": "night flight", **result.metrics})
     print("[3/3] report")

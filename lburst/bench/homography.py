@@ -46,13 +46,11 @@ from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, r
 from lburst.bench.sequences import Sequence, list_sequences, read_sequence
 from lburst.features import Features
 from lburst.io import atomic_path
-from lburst.match import mutual_nearest_neighbours
 from lburst.motion import BurstMotion, sample_motion
 from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
 from lburst.simulate import random_motion, simulate_burst, stable_seed
 
 MAX_ROTATION_DEG = 25.0
-LEARNED = ("lburst", "r2d2")
 
 
 @dataclass(frozen=True)
@@ -113,7 +111,7 @@ class MethodRunner:
     """Features of one image under the protocol for one method spec."""
 
     def __init__(self, spec: str, top_k: int) -> None:
-        from lburst.methods import create
+        from lburst.methods import accepts, create
         from lburst.methods.learned import results_key
 
         self.spec = spec
@@ -123,8 +121,7 @@ class MethodRunner:
             self.mode, prefix, inner = "oracle", "oracle-merge+", spec[len("oracle-merge+"):]
         else:
             self.mode, prefix, inner = "burst", "", spec
-        kind = inner.removeprefix("merge+").split(":")[0].split(",")[0]
-        self.extractor = create(inner, **({"top_k": str(top_k)} if kind in LEARNED else {}))
+        self.extractor = create(inner, **({"top_k": top_k} if accepts(inner, "top_k") else {}))
         self.key = prefix + results_key(inner)  # names the feature cache
 
     def __call__(self, image: np.ndarray, burst: np.ndarray, motion: BurstMotion) -> Features:
@@ -160,11 +157,13 @@ def _cached(path: Path, compute) -> tuple[Features, float]:
     return feats, seconds
 
 
-def pair_metrics(seq: Sequence, feats: list[Features], k: int) -> dict:
-    """Metrics of pair (1, k + 2)."""
+def pair_metrics(seq: Sequence, feats: list[Features], k: int, matcher=None) -> dict:
+    """Metrics of pair (1, k + 2), matched by ``matcher`` (:mod:`lburst.matching`; default mutual nearest neighbours)."""
+    from lburst.matching import create
+
     h = seq.homographies[k]
     a, b = feats[0], feats[k + 1]
-    matches = mutual_nearest_neighbours(a["descriptors"], b["descriptors"])
+    matches = (matcher or create())(a, b)
     errors = match_errors(h, a["keypoints"], b["keypoints"], matches)
     n_kp = (len(a["keypoints"]) + len(b["keypoints"])) / 2
     return {
@@ -200,15 +199,18 @@ def summarize(per_pair: dict[str, list[dict]], seconds: dict[str, float], kinds:
 
 def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[float], out: str | Path,
                              noise_specs: list[str] = (), max_side: int | None = None, top_k: int = 5000,
-                             progress: bool = True, motion: MotionRange = MotionRange()) -> dict:
-    """Run the protocol; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``."""
+                             progress: bool = True, motion: MotionRange = MotionRange(), matcher: str = "mnn") -> dict:
+    """Run the protocol, matching with the ``matcher`` spec; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``."""
+    from lburst.matching import create
+
     out = Path(out)
+    match = create(matcher)
     folders = list_sequences(data)
     levels = noise_levels(list(sigmas), list(noise_specs), motion)
     runners = {spec: MethodRunner(spec, top_k) for spec in methods}
     results: dict = {"protocol": {"data": str(data), "sigmas": list(sigmas), "noise_specs": list(noise_specs),
                                   "max_side": max_side, "top_k": top_k, "thresholds": list(THRESHOLDS),
-                                  "burst_motion": asdict(motion)},
+                                  "burst_motion": asdict(motion), "matcher": matcher},
                      "methods": {}}
     bar = tqdm(total=len(levels) * len(folders) * len(methods) * 6, desc="homography bench", disable=not progress)
     sequences = {f.name: read_sequence(f, max_side) for f in folders}
@@ -226,7 +228,7 @@ def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[
                     feats.append(f)
                     times.append(t)
                     bar.update(1)
-                per_pair[name] = [pair_metrics(seq, feats, k) for k in range(5)]
+                per_pair[name] = [pair_metrics(seq, feats, k, match) for k in range(5)]
                 seconds[name] = float(np.mean(times))
             results["methods"][spec][level.label] = {"summary": summarize(per_pair, seconds, kinds), "pairs": per_pair}
     bar.close()
@@ -289,6 +291,8 @@ def plot_mma(results: dict, path: Path) -> None:
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
+    from lburst.matching import add_matcher_argument
+
     p.add_argument("data", type=Path, help="folder of sequence folders (Oxford or HPatches layout)")
     p.add_argument("--methods", nargs="+", default=["lburst", "sift", "orb", "merge+sift"])
     p.add_argument("--sigma", type=float, nargs="+", default=[25, 50, 100], help="Gaussian noise std levels (0..255)")
@@ -301,13 +305,14 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--burst-zoom", type=float, default=0.0, metavar="Z", help="largest in-burst zoom per frame (0.01: 1%%)")
     p.add_argument("--burst-flow", type=float, default=0.0, metavar="PX",
                    help="largest std of the smooth non-uniform in-burst flow per frame (pixels)")
+    add_matcher_argument(p)
 
 
 def main(args: argparse.Namespace) -> int:
     try:
         motion = MotionRange(args.burst_rotation, args.burst_zoom, args.burst_flow)
         results = run_homography_benchmark(args.data, args.methods, args.sigma, args.out, args.noise,
-                                           args.max_side, args.top_k, motion=motion)
+                                           args.max_side, args.top_k, motion=motion, matcher=args.matcher)
     except (FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -52,7 +52,7 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
     done = out / RESULT_FILE
     if done.is_file() and not force:
         previous = ReconstructionResult.load(done)
-        if previous.method == spec:
+        if previous.method == spec and previous.metrics.get("matcher", "mnn") == options.get("matcher", "mnn"):
             reference = scene / REFERENCE_FILE
             if (reference.is_file() and not previous.error
                     and previous.metrics.get("reference_sha1") != file_sha1(reference)):
@@ -88,6 +88,8 @@ def run_benchmark(scenes: list[str | Path], methods: list[str], out_dir: str | P
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
+    from lburst.matching import add_matcher_argument
+
     parser.add_argument("scenes", nargs="+", help="scene folders (see lburst reconstruct)")
     parser.add_argument("--methods", nargs="+", default=["sift", "merge+sift", "lburst"], help="method specs")
     parser.add_argument("--out", required=True, help="output folder: OUT/<method>/<scene>/, table.md, results.json")
@@ -98,6 +100,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
     parser.add_argument("--single-camera", action="store_true", help="one camera for all images of a scene")
     parser.add_argument("--threads", type=int, default=2)
+    add_matcher_argument(parser)
     parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")
 
 
@@ -106,7 +109,8 @@ def main(args: argparse.Namespace) -> int:
 
     report = run_benchmark(args.scenes, args.methods, args.out, force=args.force, pairs=args.pairs,
                            overlap=args.overlap, fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
-                           camera=args.camera, single_camera=args.single_camera, num_threads=args.threads)
+                           camera=args.camera, single_camera=args.single_camera, num_threads=args.threads,
+                           matcher=args.matcher)
     table = markdown_table(report["rows"] + report["means"])
     with atomic_path(Path(args.out) / "table.md") as tmp:
         tmp.write_text(table + "\n")

@@ -21,7 +21,7 @@ from tqdm import tqdm
 
 from lburst import store
 from lburst.io import BurstError, atomic_path, load_burst, read_features_npz, write_features_h5
-from lburst.methods import create
+from lburst.methods import accepts, create
 from lburst.model import AUTOCAST_DTYPES, CheckpointError
 from lburst.sources import add_recording_arguments, is_recording, open_recording, recording_options
 
@@ -134,13 +134,10 @@ def extract_burst(path: Path, extractor, args: argparse.Namespace, method: dict,
 def main(args: argparse.Namespace) -> int:
     spec = method_spec(args.method, args.weights, args.frame_order)
     options = {}
-    if spec.startswith("lburst") or spec.startswith("r2d2"):
-        options["top_k"] = str(args.top_k)
-        if args.device:
-            options["device"] = args.device
-        if args.precision != "fp32":
-            options["precision"] = args.precision
     try:
+        wanted = {"top_k": str(args.top_k), "device": args.device,
+                  "precision": args.precision if args.precision != "fp32" else None}
+        options = {k: v for k, v in wanted.items() if v is not None and accepts(spec, k)}  # learned methods have them
         extractor = create(spec, **options)
     except (CheckpointError, FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -7,39 +7,73 @@ It has a ``name`` attribute.
 
 Methods are created from a *spec* string::
 
-    NAME[:ARG][,KEY=VALUE...]
+    NAME[:ARG][,KEY=VALUE...]        a method
+    WRAPPER[,KEY=VALUE...]+SPEC      a method that wraps the extractor of SPEC
 
-``NAME`` picks a factory from the registry, ``ARG`` is the factory's positional
-argument (a checkpoint path for learned methods) and ``KEY=VALUE`` pairs are passed
-as keyword arguments (as strings; each factory converts its own).  A spec starting
-with ``merge+`` aligns and averages the burst first, then runs the rest of the spec
-on the merged image (see :mod:`lburst.methods.merge`).  Examples: ``lburst``,
-``lburst:weights.pt,frame_order=published``, ``sift``, ``orb,max_features=2000``,
-``merge+sift``, ``buff``.
+``NAME`` picks a method from the registry, ``ARG`` is its positional argument (a
+checkpoint path for learned methods) and ``KEY=VALUE`` pairs are its options.  Each
+method declares its options as a dataclass (:func:`register`); :func:`create` converts
+and checks them in one place (:func:`lburst.methods.options.parse_options`), and an
+error lists the valid options with their types and defaults.  A wrapper such as
+``merge`` (align and average the burst, then run SPEC on the merged image) is a
+registered method too.  Examples: ``lburst``, ``lburst:weights.pt,frame_order=published``,
+``sift``, ``orb,max_features=2000``, ``merge+sift``, ``merge,reduce=median+orb``, ``buff``.
+``lburst methods`` lists every method with its options.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
 
 from lburst.features import Extractor
+from lburst.methods.options import parse_options
 
-__all__ = ["Extractor", "Factory", "available", "create", "parse_spec", "register"]
+__all__ = ["Extractor", "MethodInfo", "Spec", "accepts", "available", "create", "methods",
+           "parse_spec", "register", "weights_file"]
 
 Factory = Callable[..., Extractor]
 
-_FACTORIES: dict[str, Factory] = {}
+_METHODS: dict[str, MethodInfo] = {}
 
-# modules that register factories when imported
+# modules that register methods when imported
 _PROVIDERS = ("lburst.methods.learned", "lburst.methods.opencv", "lburst.methods.merge", "lburst.methods.buff")
 
 
-def register(name: str) -> Callable[[Factory], Factory]:
-    """Decorator: register ``factory(arg: str | None, **options: str) -> Extractor`` as ``name``."""
+@dataclass(frozen=True)
+class MethodInfo:
+    """A registered method.
+
+    Attributes:
+        name: its name in specs.
+        factory: ``factory(arg, options)`` (``factory(inner_extractor, options)`` for a
+            wrapper) returning the extractor; ``options`` is an instance of ``options``.
+        options: the options dataclass (``None``: no options).
+        arg: what the spec's ``ARG`` is (e.g. ``'checkpoint'``); ``None``: it takes none.
+        wraps: a wrapper, written ``NAME+SPEC``.
+        weights: ``weights(arg)``: the checkpoint file a spec with this ``arg`` loads
+            (results are cached by its content); ``None`` for methods without weights.
+        summary: one line for ``lburst methods``.
+    """
+
+    name: str
+    factory: Callable[..., Extractor]
+    options: type | None = None
+    arg: str | None = None
+    wraps: bool = False
+    weights: Callable[[str | None], Path | None] | None = None
+    summary: str = ""
+
+
+def register(name: str, options: type | None = None, *, arg: str | None = None, wraps: bool = False,
+             weights: Callable[[str | None], Path | None] | None = None) -> Callable[[Factory], Factory]:
+    """Decorator: register ``factory`` as method ``name`` (see :class:`MethodInfo`)."""
 
     def wrap(factory: Factory) -> Factory:
-        _FACTORIES[name] = factory
+        summary = (factory.__doc__ or "").strip().splitlines()[0] if factory.__doc__ else ""
+        _METHODS[name] = MethodInfo(name, factory, options, arg, wraps, weights, summary)
         return factory
 
     return wrap
@@ -54,38 +88,99 @@ def _load_providers() -> None:
                 raise
 
 
+def methods() -> list[MethodInfo]:
+    """Every registered method, by name."""
+    _load_providers()
+    return [_METHODS[n] for n in sorted(_METHODS)]
+
+
 def available() -> list[str]:
     """Names of the registered methods."""
-    _load_providers()
-    return sorted(_FACTORIES)
+    return [m.name for m in methods()]
 
 
-def parse_spec(spec: str) -> tuple[str, str | None, dict[str, str]]:
-    """Split ``NAME[:ARG][,KEY=VALUE...]`` into its parts."""
-    head, *pairs = spec.split(",")
-    name, _, arg = head.partition(":")
+@dataclass(frozen=True)
+class Spec:
+    """A parsed method spec: ``name``, ``arg``, ``options`` (strings) and, for a wrapper, the ``inner`` spec."""
+
+    text: str
+    name: str
+    arg: str | None
+    options: dict[str, str]
+    inner: Spec | None = None
+
+
+def _split(head: str, spec: str) -> tuple[str, str | None, dict[str, str]]:
+    first, *pairs = head.split(",")
+    name, _, arg = first.partition(":")
     options = {}
     for pair in pairs:
         key, eq, value = pair.partition("=")
-        if not eq or not key:
+        if not eq or not key.strip():
             raise ValueError(f"bad option {pair!r} in method spec {spec!r}: expected KEY=VALUE")
         options[key.strip()] = value.strip()
     return name.strip(), (arg or None), options
 
 
-def create(spec: str, **options) -> Extractor:
+def parse_spec(spec: str) -> Spec:
+    """Parse ``NAME[:ARG][,KEY=VALUE...]`` or ``WRAPPER[,KEY=VALUE...]+SPEC`` (module docstring)."""
+    _load_providers()
+    head, plus, rest = spec.partition("+")
+    if plus:
+        name, arg, options = _split(head, spec)
+        info = _METHODS.get(name)
+        if info is not None and info.wraps:
+            if arg is not None:
+                raise ValueError(f"method {name!r} takes no argument, got {arg!r} in {spec!r}")
+            return Spec(spec, name, None, options, parse_spec(rest))
+    name, arg, options = _split(spec, spec)
+    return Spec(spec, name, arg, options)
+
+
+def _info(name: str, spec: str) -> MethodInfo:
+    if name not in _METHODS:
+        raise ValueError(f"unknown method {name!r} in {spec!r}; available: {', '.join(available())}")
+    return _METHODS[name]
+
+
+def _innermost(spec: Spec) -> Spec:
+    while spec.inner is not None:
+        spec = spec.inner
+    return spec
+
+
+def accepts(spec: str, option: str) -> bool:
+    """Whether the method that ``spec`` runs on the burst (inside any wrappers) has ``option``."""
+    inner = _innermost(parse_spec(spec))
+    options = _info(inner.name, spec).options
+    return options is not None and option in options.__dataclass_fields__
+
+
+def weights_file(spec: str) -> Path | None:
+    """The checkpoint file that ``spec`` loads (inside any wrappers), or ``None``."""
+    inner = _innermost(parse_spec(spec))
+    info = _info(inner.name, spec)
+    return info.weights(inner.arg) if info.weights is not None else None
+
+
+def _build(spec: Spec, runtime: dict[str, Any]) -> Extractor:
+    info = _info(spec.name, spec.text)
+    if info.wraps:
+        inner = _build(spec.inner, runtime)
+        extractor = info.factory(inner, parse_options(info.options, spec.options, spec.name))
+    else:
+        if spec.arg is not None and info.arg is None:
+            raise ValueError(f"method {spec.name!r} takes no argument, got {spec.arg!r}")
+        extractor = info.factory(spec.arg, parse_options(info.options, {**spec.options, **runtime}, spec.name))
+    extractor.name = spec.text
+    return extractor
+
+
+def create(spec: str, **options: Any) -> Extractor:
     """Create the extractor described by ``spec`` (see the module docstring).
 
-    Keyword ``options`` are added to those in the spec (for example ``device``).
+    Keyword ``options`` (strings or typed values, for example ``device``) are added to
+    those in the spec of the method that runs on the burst (inside any wrappers).
     """
-    _load_providers()
-    if spec.startswith("merge+"):
-        from lburst.methods.merge import MergeThen
+    return _build(parse_spec(spec), options)
 
-        return MergeThen(create(spec[len("merge+") :], **options))
-    name, arg, spec_options = parse_spec(spec)
-    if name not in _FACTORIES:
-        raise ValueError(f"unknown method {name!r} in {spec!r}; available: {', '.join(available())}")
-    extractor = _FACTORIES[name](arg, **{**spec_options, **options})
-    extractor.name = spec
-    return extractor

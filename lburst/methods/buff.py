@@ -46,7 +46,6 @@ from lburst.features import Features, empty_features
 from lburst.methods import register, sift_describe
 from lburst.methods.buff_scale import OctaveStack, frame_pyramids
 from lburst.methods.frames import gray_unit, time_offsets
-from lburst.methods.options import as_floats, check_known
 
 BORDER = 5  # pixels kept from the octave's border, as SIFT
 MAX_REFINE_STEPS = 5
@@ -388,21 +387,22 @@ def _derivatives(cube: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return grad, hess.astype(np.float64)
 
 
-_CONVERTERS = {
-    "slope_min": float, "slope_max": float, "slope_step": float, "direction": lambda v: as_floats(v, 2),
-    "sigma": float, "init_sigma": float, "layers": int, "octaves": int, "contrast_threshold": float,
-    "edge_threshold": float, "max_features": int, "min_slope_sharpness": float,
-}
+@dataclass(frozen=True)
+class BuffOptions(BuffConfig):
+    """The :class:`BuffConfig` fields, plus ``slope_range`` (``min:max``, setting both slope
+    bounds at once) and ``cache_mb`` (memory for the per-frame pyramids)."""
+
+    slope_range: tuple[float, float] | None = None
+    cache_mb: int = 384
+
+    def config(self) -> BuffConfig:
+        values = {name: getattr(self, name) for name in BuffConfig.__dataclass_fields__}
+        if self.slope_range is not None:
+            values["slope_min"], values["slope_max"] = self.slope_range
+        return BuffConfig(**values)
 
 
-@register("buff")
-def buff(arg: str | None = None, slope_range: str | None = None, **options: str) -> Buff:
-    """BuFF; options are :class:`BuffConfig` fields (``direction=1:0``, ``slope_range=-2:2``) and ``cache_mb``."""
-    if arg:
-        raise ValueError(f"buff takes no argument, got {arg!r}")
-    cache_mb = int(options.pop("cache_mb", 384))
-    check_known(options, set(_CONVERTERS), "buff")
-    values = {k: _CONVERTERS[k](v) for k, v in options.items()}
-    if slope_range is not None:
-        values["slope_min"], values["slope_max"] = as_floats(slope_range, 2)
-    return Buff(BuffConfig(**values), cache_mb=cache_mb)
+@register("buff", BuffOptions)
+def buff(arg: None, options: BuffOptions) -> Buff:
+    """BuFF: keypoints with a scale and an apparent motion, found across the burst."""
+    return Buff(options.config(), cache_mb=options.cache_mb)

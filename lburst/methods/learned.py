@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
 from lburst.extract import LBurst, MultiScaleConfig
 from lburst.features import Features
 from lburst.methods import register
-from lburst.methods.options import as_bool
 from lburst.model import autocast_dtype
 
 DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "r2d2": "lburst-b1"}
@@ -19,19 +19,13 @@ DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "r2d2": "lburst-b1"}
 def weights_file(spec: str) -> Path | None:
     """The checkpoint file that a method spec loads (``None`` when it loads none).
 
-    ``lburst[:CKPT]`` and ``r2d2[:CKPT]``, also behind ``merge+``; without ``CKPT`` the
-    shipped weights.  Caches of results key on this file's content, so that a
-    checkpoint retrained in place (or new shipped weights) is not served stale results.
+    ``lburst[:CKPT]`` and ``r2d2[:CKPT]``, also inside a wrapper (``merge+``); without
+    ``CKPT`` the shipped weights.  Caches of results key on this file's content, so that
+    a checkpoint retrained in place (or new shipped weights) is not served stale results.
     """
-    from lburst.methods import parse_spec
-    from lburst.weights import weights_path
+    from lburst.methods import weights_file as method_weights
 
-    while spec.startswith("merge+"):
-        spec = spec[len("merge+"):]
-    name, arg, _ = parse_spec(spec)
-    if name not in DEFAULT_WEIGHTS:
-        return None
-    return Path(arg) if arg else weights_path(DEFAULT_WEIGHTS[name])
+    return method_weights(spec)
 
 
 def results_key(spec: str) -> str:
@@ -43,10 +37,37 @@ def results_key(spec: str) -> str:
     return f"{spec}@{file_sha1(path)[:12]}" if path is not None and path.is_file() else spec
 
 
+@dataclass(frozen=True)
+class LearnedOptions:
+    """Options of a learned method: loading (``frame_order``, ``device``), how many
+    keypoints (``top_k``; ``none``: all) and the :class:`lburst.extract.MultiScaleConfig`
+    fields below (the paper's defaults)."""
+
+    top_k: int | None = 4000
+    frame_order: Literal["temporal", "published"] = "temporal"
+    device: str | None = None
+    min_size: int = MultiScaleConfig.min_size
+    max_size: int = MultiScaleConfig.max_size
+    scale_factor: float = MultiScaleConfig.scale_factor
+    rel_thr: float = MultiScaleConfig.rel_thr
+    rep_thr: float = MultiScaleConfig.rep_thr
+    published_coordinates: bool = MultiScaleConfig.published_coordinates
+    fast: bool = MultiScaleConfig.fast
+    precision: str = MultiScaleConfig.precision
+
+    def __post_init__(self) -> None:
+        autocast_dtype(self.precision)  # a clear error for an unknown precision
+
+    def multiscale(self) -> dict:
+        """The :class:`MultiScaleConfig` fields, for :meth:`LBurst.extract`."""
+        return {name: getattr(self, name) for name in ("min_size", "max_size", "scale_factor", "rel_thr", "rep_thr",
+                                                       "published_coordinates", "fast", "precision")}
+
+
 class LearnedExtractor:
     """Wraps :class:`lburst.LBurst` in the extractor interface."""
 
-    def __init__(self, model: LBurst, top_k: int = 4000, **options) -> None:
+    def __init__(self, model: LBurst, top_k: int | None = 4000, **options) -> None:
         self.model = model
         self.top_k = top_k
         self.options = options
@@ -57,33 +78,31 @@ class LearnedExtractor:
         return self.model.extract(burst, top_k=self.top_k, **self.options)
 
 
-def _precision(value: str) -> str:
-    autocast_dtype(value)  # a clear error for an unknown precision
-    return value
-
-
-def _make(arg: str | None, default: str, device=None, frame_order: str = "temporal", top_k="4000", **options):
+def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtractor:
     model = (
-        LBurst.from_checkpoint(arg, device=device, frame_order=frame_order)
+        LBurst.from_checkpoint(arg, device=options.device, frame_order=options.frame_order)
         if arg
-        else LBurst.pretrained(default, device=device)
+        else LBurst.pretrained(default, device=options.device)
     )
-    conv = {"min_size": int, "max_size": int, "scale_factor": float, "rel_thr": float, "rep_thr": float,
-            "published_coordinates": as_bool, "fast": as_bool, "precision": _precision}
-    unknown = set(options) - set(conv)
-    if unknown:
-        raise ValueError(f"unknown options {sorted(unknown)} for a learned method; known: {sorted(conv)}")
-    top = None if str(top_k).lower() == "none" else int(top_k)
-    return LearnedExtractor(model, top, **{k: conv[k](v) for k, v in options.items()})
+    return LearnedExtractor(model, options.top_k, **options.multiscale())
 
 
-@register("lburst")
-def lburst(arg: str | None = None, **options) -> LearnedExtractor:
-    """A burst network: the shipped ``lburst-b5`` or the checkpoint at ``arg``."""
-    return _make(arg, DEFAULT_WEIGHTS["lburst"], **options)
+def _weights(default: str):
+    def weights(arg: str | None) -> Path:
+        from lburst.weights import weights_path
+
+        return Path(arg) if arg else weights_path(default)
+
+    return weights
 
 
-@register("r2d2")
-def r2d2(arg: str | None = None, **options) -> LearnedExtractor:
-    """A single-image network on the common frame: the shipped ``lburst-b1`` or the checkpoint ``arg``."""
-    return _make(arg, DEFAULT_WEIGHTS["r2d2"], **options)
+@register("lburst", LearnedOptions, arg="checkpoint", weights=_weights(DEFAULT_WEIGHTS["lburst"]))
+def lburst(arg: str | None, options: LearnedOptions) -> LearnedExtractor:
+    """A burst network: the shipped lburst-b5, or the checkpoint ARG."""
+    return _make(arg, DEFAULT_WEIGHTS["lburst"], options)
+
+
+@register("r2d2", LearnedOptions, arg="checkpoint", weights=_weights(DEFAULT_WEIGHTS["r2d2"]))
+def r2d2(arg: str | None, options: LearnedOptions) -> LearnedExtractor:
+    """A single-image network on the common frame: the shipped lburst-b1, or the checkpoint ARG."""
+    return _make(arg, DEFAULT_WEIGHTS["r2d2"], options)

@@ -4,18 +4,21 @@ run any single-image method on the merged image.
 ``merge_burst`` returns float32 ``(H, W, 3)`` on the burst dtype's scale (0..255 for
 uint8, 0..65535 for uint16); :class:`MergeThen` rounds and clips it back to the burst's
 dtype and hands it to the inner extractor as a 1-frame burst.  Specs ``merge+sift``,
-``merge+orb``, ``merge+r2d2:CKPT`` build a :class:`MergeThen` through
-:func:`lburst.methods.create`.  Shift convention: see :mod:`lburst.methods.align`.
+``merge+orb``, ``merge+r2d2:CKPT``, ``merge,reduce=median+sift`` build a
+:class:`MergeThen` through :func:`lburst.methods.create` (``merge`` is a registered
+wrapper with :class:`MergeOptions`).  Shift convention: see :mod:`lburst.methods.align`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Literal
 
 import cv2
 import numpy as np
 
 from lburst.features import Extractor, Features
+from lburst.methods import register
 from lburst.methods.align import Method, Motion, estimate_shifts
 from lburst.methods.frames import check_burst, dtype_max
 
@@ -97,3 +100,19 @@ class MergeThen:
         merged = merge_burst(burst, shifts, reduce=self.reduce, method=self.method, motion=self.motion)
         image = np.clip(np.rint(merged), 0, dtype_max(burst.dtype)).astype(burst.dtype)
         return self.inner(image[None])
+
+
+@dataclass(frozen=True)
+class MergeOptions:
+    """Alignment ``method`` (phase correlation, or refined by ECC), ``motion`` model of the
+    shifts (``linear``: constant velocity) and the ``reduce`` over frames."""
+
+    method: Literal["phase", "ecc"] = "ecc"
+    motion: Literal["free", "linear"] = "linear"
+    reduce: Literal["mean", "median"] = "mean"
+
+
+@register("merge", MergeOptions, wraps=True)
+def merge(inner: Extractor, options: MergeOptions) -> MergeThen:
+    """Burst with Merge: align and average the frames, then run SPEC on the merged image."""
+    return MergeThen(inner, method=options.method, motion=options.motion, reduce=options.reduce)

@@ -11,13 +11,14 @@ its ``angle`` in radians.  SIFT descriptors are float32 (L2); ORB's stay packed 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
 from lburst.features import Features, empty_features
 from lburst.methods import register
 from lburst.methods.frames import check_burst, to_gray8
-from lburst.methods.options import as_bool, check_known
 
 
 def keypoints_to_features(keypoints: tuple[cv2.KeyPoint, ...], descriptors: np.ndarray | None, dim: int,
@@ -67,21 +68,30 @@ class OpenCVExtractor:
         return features
 
 
-@register("sift")
-def sift(arg: str | None = None, max_features: str = "5000", root: str = "false",
-         contrast_threshold: str = "0.04", **options: str) -> OpenCVExtractor:
-    """SIFT with OpenCV's defaults; ``root=true`` gives RootSIFT descriptors."""
-    check_known(options, set(), "sift")
-    if arg:
-        raise ValueError(f"sift takes no argument, got {arg!r}")
-    detector = cv2.SIFT_create(nfeatures=int(max_features), contrastThreshold=float(contrast_threshold))
-    return OpenCVExtractor(detector, 128, binary=False, root=as_bool(root))
+@dataclass(frozen=True)
+class SiftOptions:
+    """OpenCV's SIFT: ``max_features`` kept, ``contrast_threshold``, and ``root`` for RootSIFT descriptors."""
+
+    max_features: int = 5000
+    root: bool = False
+    contrast_threshold: float = 0.04
 
 
-@register("orb")
-def orb(arg: str | None = None, max_features: str = "5000", **options: str) -> OpenCVExtractor:
-    """ORB with OpenCV's defaults; descriptors are 32 packed bytes."""
-    check_known(options, set(), "orb")
-    if arg:
-        raise ValueError(f"orb takes no argument, got {arg!r}")
-    return OpenCVExtractor(cv2.ORB_create(nfeatures=int(max_features)), 32, binary=True)
+@register("sift", SiftOptions)
+def sift(arg: None, options: SiftOptions) -> OpenCVExtractor:
+    """SIFT (OpenCV's defaults) on the common frame; root=true gives RootSIFT."""
+    detector = cv2.SIFT_create(nfeatures=options.max_features, contrastThreshold=options.contrast_threshold)
+    return OpenCVExtractor(detector, 128, binary=False, root=options.root)
+
+
+@dataclass(frozen=True)
+class OrbOptions:
+    """OpenCV's ORB: ``max_features`` kept."""
+
+    max_features: int = 5000
+
+
+@register("orb", OrbOptions)
+def orb(arg: None, options: OrbOptions) -> OpenCVExtractor:
+    """ORB (OpenCV's defaults) on the common frame; descriptors are 32 packed bytes."""
+    return OpenCVExtractor(cv2.ORB_create(nfeatures=options.max_features), 32, binary=True)

@@ -32,7 +32,6 @@ from tqdm import tqdm
 
 from lburst.features import Features, check_features
 from lburst.io import atomic_path, write_image
-from lburst.match import mutual_nearest_neighbours
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, exif_source, list_scene, load_item, reference_cameras
 from lburst.sources import is_recording
@@ -62,6 +61,8 @@ class ReconstructOptions:
             farther apart (loop-closure candidates, :mod:`lburst.sfm.retrieval`).
         recording: :class:`lburst.sources.RecordingOptions` for a scene that is a
             recording (video or frame folder); ``None``: the defaults.
+        matcher: matcher spec (:mod:`lburst.matching`): ``'mnn'`` (mutual nearest
+            neighbours), ``'ratio'``, ``'ratio,ratio=0.9'``, ...
     """
 
     pairs: str = "auto"
@@ -78,6 +79,7 @@ class ReconstructOptions:
     extra: dict = field(default_factory=dict)
     retrieval: int = 0
     recording: Any = None
+    matcher: str = "mnn"
 
 
 @dataclass
@@ -290,10 +292,13 @@ def scene_cameras(scene: Scene, shapes: list[tuple[int, int]], options: Reconstr
     return priors, list(range(len(priors)))
 
 
-def match_pairs(features: list[Features], pairs: list[tuple[int, int]], progress: bool = True) -> list[np.ndarray]:
-    """Mutual nearest-neighbour matches (M, 2) of each pair."""
-    return [mutual_nearest_neighbours(features[a]["descriptors"], features[b]["descriptors"])
-            for a, b in tqdm(pairs, desc="matching", disable=not progress, leave=False)]
+def match_pairs(features: list[Features], pairs: list[tuple[int, int]], progress: bool = True,
+                matcher: str = "mnn") -> list[np.ndarray]:
+    """Matches (M, 2) of each pair, by the matcher spec ``matcher`` (mutual nearest neighbours by default)."""
+    from lburst.matching import create
+
+    match = create(matcher)
+    return [match(features[a], features[b]) for a, b in tqdm(pairs, desc="matching", disable=not progress, leave=False)]
 
 
 def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Path, extractor=None,
@@ -335,7 +340,7 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
 
         loops = retrieval_pairs(vlad([f["descriptors"] for f in features], seed=opts.seed), opts.retrieval, opts.overlap)
         pairs = sorted(set(pairs) | set(loops))
-    matches = match_pairs(features, pairs, opts.progress)
+    matches = match_pairs(features, pairs, opts.progress, opts.matcher)
     # a recording's meta.json camera is its calibration: one camera, held fixed
     calibrated = scene.camera is not None and opts.camera == "auto"
     if calibrated and all(cam == cameras[0] for cam in cameras):
@@ -363,12 +368,13 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
         if attempt or done or not opts.fallback_exhaustive or mode == "exhaustive":
             break
         extra = [p for p in exhaustive_pairs(n) if p not in set(pairs)]
-        pairs, matches = pairs + extra, matches + match_pairs(features, extra, opts.progress)
+        pairs, matches = pairs + extra, matches + match_pairs(features, extra, opts.progress, opts.matcher)
     verified = np.load(job_dir / "verified.npz") if (job_dir / "verified.npz").is_file() and not result.error else None
     inlier_counts = [len(verified[k]) for k in verified.files if k.startswith("inl_")] if verified is not None else []
     result.metrics = scene_metrics(n, [len(f["keypoints"]) for f in features], [len(m) for m in matches],
                                    inlier_counts, summary if not result.error else {})
-    result.metrics.update(pairs=len(pairs), pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive")
+    result.metrics.update(pairs=len(pairs), pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive",
+                          matcher=opts.matcher)
     for name, image in summary.get("registered", {}).items():
         result.registered.append(name)
         result.poses[name] = (np.array(image["R"]), np.array(image["t"]))
@@ -385,6 +391,8 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
+    from lburst.matching import add_matcher_argument
+
     parser.add_argument("scene", help="scene folder (one sub-folder of frames per burst, or single images), "
                                       "or a recording: a video, or a folder of DNG frames")
     parser.add_argument("--method", default="lburst", help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...)")
@@ -403,6 +411,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    add_matcher_argument(parser)
     parser.add_argument("--retrieval", type=int,
                         help="sequential pairs: also match each image with its N most similar images farther apart "
                              "(loop closure; default 5 for a recording, 0 for a scene)")
@@ -419,7 +428,7 @@ def main(args: argparse.Namespace) -> int:
                                    fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
                                    camera=args.camera, camera_model=args.camera_model,
                                    single_camera=args.single_camera, fix_intrinsics=args.fix_intrinsics,
-                                   num_threads=args.threads, seed=args.seed,
+                                   num_threads=args.threads, seed=args.seed, matcher=args.matcher,
                                    retrieval=args.retrieval if args.retrieval is not None else
                                    (5 if is_recording(args.scene) else 0),
                                    recording=recording_options(args))

@@ -1,0 +1,110 @@
+"""Matcher registry: mutual nearest neighbours (unchanged results), the ratio test, and spec checking."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lburst.match import mutual_nearest_neighbours
+from lburst.matching import available, create, matcher_spec
+
+
+def feats(desc: np.ndarray) -> dict:
+    k = len(desc)
+    return {"keypoints": np.zeros((k, 2), np.float32), "scales": np.ones(k, np.float32),
+            "scores": np.ones(k, np.float32), "descriptors": desc}
+
+
+def unit(rng, n, d=16):
+    x = rng.normal(size=(n, d)).astype(np.float32)
+    return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+
+def reference_ratio(a: np.ndarray, b: np.ndarray, ratio: float, mutual: bool) -> set[tuple[int, int]]:
+    dist = np.linalg.norm(a[:, None] - b[None], axis=2)
+    order = np.argsort(dist, axis=1)
+    out = set()
+    for i in range(len(a)):
+        j, j2 = order[i, 0], order[i, 1]
+        if dist[i, j] <= ratio * dist[i, j2] and (not mutual or dist[:, j].argmin() == i):
+            out.add((i, int(j)))
+    return out
+
+
+def test_registry_lists_the_matchers_with_their_options():
+    names = {m.name: m for m in available()}
+    assert {"mnn", "ratio"} <= set(names)
+    assert names["ratio"].summary
+
+
+def test_mnn_is_the_mutual_nearest_neighbours_used_so_far():
+    rng = np.random.default_rng(0)
+    a, b = unit(rng, 300), unit(rng, 250)
+    expected = mutual_nearest_neighbours(a, b)
+    got = create("mnn")(feats(a), feats(b))
+    np.testing.assert_array_equal(got, expected)
+    assert create().name == "mnn"
+
+
+@pytest.mark.parametrize("mutual", [True, False])
+def test_ratio_test_matches_a_brute_force_reference(mutual):
+    rng = np.random.default_rng(1)
+    b = unit(rng, 200)
+    a = b[rng.permutation(200)[:150]] + 0.05 * unit(rng, 150)  # noisy copies: clear matches
+    a = np.concatenate([a, unit(rng, 50)]).astype(np.float32)  # and distractors
+    got = create(f"ratio,ratio=0.8,mutual={str(mutual).lower()}")(feats(a), feats(b))
+    assert got.dtype == np.int64 and got.shape[1] == 2
+    assert set(map(tuple, got.tolist())) == reference_ratio(a, b, 0.8, mutual)
+    assert len(got) >= 140  # the noisy copies pass the ratio test
+
+
+def test_ratio_test_rejects_ambiguous_matches_that_mnn_keeps():
+    b = np.array([[1, 0, 0], [0.99, 0.141, 0], [0, 0, 1]], np.float32)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    a = np.array([[1, 0.07, 0], [0, 0.05, 1]], np.float32)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    mnn = {tuple(m) for m in create("mnn")(feats(a), feats(b)).tolist()}
+    ratio = {tuple(m) for m in create("ratio")(feats(a), feats(b)).tolist()}
+    assert (0, 0) in mnn and (1, 2) in mnn
+    assert ratio == {(1, 2)}  # a[0] lies between b[0] and b[1]
+
+
+def test_ratio_test_on_binary_descriptors_and_edge_cases():
+    rng = np.random.default_rng(2)
+    b = rng.integers(0, 256, (60, 32), dtype=np.uint8)
+    a = b[:40].copy()
+    a[:, 0] ^= 1  # one bit off: still far nearer than any other
+    got = create("ratio")(feats(a), feats(b))
+    assert {tuple(m) for m in got.tolist()} == {(i, i) for i in range(40)}
+    empty = create("ratio")(feats(a[:0]), feats(b))
+    assert empty.shape == (0, 2)
+    one = create("ratio")(feats(a[:3]), feats(b[:1]))  # no second neighbour: nearest only, mutual
+    assert one.shape == (1, 2)
+    with pytest.raises(ValueError, match="descriptor types differ"):
+        create("ratio")(feats(a), feats(b.astype(np.float32)))
+
+
+def test_bad_specs_name_the_valid_options():
+    with pytest.raises(ValueError, match=r"unknown matcher 'nope'; available: mnn \(max_distance"):
+        create("nope")
+    with pytest.raises(ValueError, match=r"unknown options for matcher 'ratio': foo; valid: ratio: float = 0.8, "
+                                         r"mutual: bool = true"):
+        create("ratio,foo=1")
+    with pytest.raises(ValueError, match=r"option ratio of matcher 'ratio': expected float, got 'x'"):
+        create("ratio,ratio=x")
+    with pytest.raises(ValueError, match=r"ratio must be in \(0, 1\]"):
+        create("ratio,ratio=1.5")
+    with pytest.raises(ValueError, match="expected KEY=VALUE"):
+        create("ratio,0.8")
+    assert matcher_spec("mnn,max_distance=1.2") == "mnn,max_distance=1.2"
+
+
+@pytest.mark.parametrize("words", [["reconstruct", "scene", "--out", "o"], ["bench", "homography", "data"],
+                                   ["bench", "reconstruction", "scene", "--out", "o"], ["demo"]])
+def test_commands_check_the_matcher_before_they_start(words, capsys):
+    from lburst.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main([*words, "--matcher", "ratio,ratio=3"])
+    assert info.value.code == 2
+    assert "argument --matcher: matcher 'ratio': ratio must be in (0, 1]" in capsys.readouterr().err
