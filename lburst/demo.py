@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.io import atomic_path, load_burst
+from lburst.io import atomic_path, load_burst, read_features_npz
 from lburst.viz import new_figure
 
 
@@ -40,7 +40,24 @@ def lburst_spec(weights: str | None) -> str:
 
 
 def _label(spec: str) -> str:
-    return "lburst" if spec.startswith("lburst") else spec.replace(":", "_").replace("/", "_").replace(",", "_")
+    """A readable label (table row, output folder) that tells specs apart: a checkpoint
+    path becomes its file stem, ``lburst:../RoBLo_N16_B5.pt,frame_order=published`` is
+    ``lburst-RoBLo_N16_B5-frame_order=published``."""
+    *merges, last = spec.split("+")
+    head, *options = last.split(",")
+    name, _, arg = head.partition(":")
+    parts = [name] + ([Path(arg).stem] if arg else []) + options
+    return "+".join(merges + ["-".join(parts)]).replace("/", "_").replace(":", "_")
+
+
+def method_labels(specs: list[str]) -> dict[str, str]:
+    """``_label`` of every spec, with 6 hex digits of the spec's SHA-1 added where two collide."""
+    import hashlib
+
+    labels = {spec: _label(spec) for spec in specs}
+    clashes = {lab for lab in labels.values() if list(labels.values()).count(lab) > 1}
+    return {spec: f"{lab}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}" if lab in clashes else lab
+            for spec, lab in labels.items()}
 
 
 def plot_matches(image_a: np.ndarray, image_b: np.ndarray, kp_a: np.ndarray, kp_b: np.ndarray, path: Path,
@@ -107,6 +124,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from lburst.extract import LBurst
+    from lburst.methods import create
     from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
     from lburst.sfm.metrics import markdown_table
     from lburst.sfm.reconstruct import reconstruct_scene
@@ -123,8 +141,9 @@ def main(args: argparse.Namespace) -> int:
     print(f"[1/3] night flight: {cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, noise {cfg.noise}")
     reference = make_night_flight(out / "scene", cfg)
     results, rows = {}, []
+    labels = method_labels(methods)
     for i, spec in enumerate(methods):
-        label = _label(spec)
+        label = labels[spec]
         print(f"[2/3] reconstruct with {spec} ({i + 1}/{len(methods)})")
         # the drone's camera is calibrated: both methods get the true intrinsics, fixed, and
         # sequential pairs along the trajectory
@@ -140,11 +159,11 @@ def main(args: argparse.Namespace) -> int:
     for label, result in results.items():
         data = result.match_data()
         kp_path = out / f"keypoints_{label}.png"
-        feats = np.load(Path(result.out_dir) / "features" / f"{show}.npz")
+        feats = read_features_npz(Path(result.out_dir) / "features" / f"{show}.npz")
         maps = (None, None)
-        if label == "lburst":
-            spec = next(s for s in methods if _label(s) == "lburst")
-            model = LBurst.pretrained("lburst-b5") if spec == "lburst" else LBurst.from_checkpoint(spec.split(":", 1)[1])
+        spec = next(s for s in methods if labels[s] == label)
+        model = getattr(create(spec), "model", None)  # a learned burst method: show its maps too
+        if isinstance(model, LBurst) and model.frames == len(burst):
             dense = model.dense(burst)
             maps = (dense["repeatability"], dense["reliability"])
         plot_keypoints_and_maps(burst[len(burst) // 2], feats["keypoints"], *maps, kp_path, title=f"{label}, burst {show}")

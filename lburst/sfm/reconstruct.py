@@ -31,7 +31,8 @@ import numpy as np
 from tqdm import tqdm
 
 from lburst.features import Features, check_features
-from lburst.io import atomic_path, write_image
+from lburst import store
+from lburst.io import atomic_path, file_sha1, read_features_npz, write_image
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, exif_source, list_scene, load_item, reference_cameras
 from lburst.sources import is_recording
@@ -137,7 +138,7 @@ class ReconstructionResult:
         verified = out / "colmap" / "verified.npz"
         if not verified.is_file():
             return None
-        keypoints = [np.load(out / "features" / f"{name}.npz")["keypoints"] for name in self.names]
+        keypoints = [read_features_npz(out / "features" / f"{name}.npz")["keypoints"] for name in self.names]
         data = np.load(verified)
         pairs = data["pairs"].reshape(-1, 2)
         return keypoints, pairs, [data[f"inl_{q}"] for q in range(len(pairs))]
@@ -165,36 +166,30 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def save_features(path: Path, features: Features, spec: str, shape: tuple[int, int]) -> None:
-    with atomic_path(path) as tmp:
-        np.savez(tmp, _spec=np.array(spec), _shape=np.array(shape), **features)
+def save_features(path: Path, features: Features, key, shape: tuple[int, int], **info) -> None:
+    """Store the features of an image of ``shape`` (H, W) under ``key`` (:mod:`lburst.store`)."""
+    store.save(path, features, (shape[1], shape[0]), key, **info)
 
 
-def load_features(path: Path, spec: str) -> tuple[Features, tuple[int, int]] | None:
-    """Cached features of ``spec``, or ``None`` (missing, other method, unreadable)."""
-    if not path.is_file():
-        return None
-    try:
-        data = np.load(path)
-        if str(data["_spec"]) != spec:
-            return None
-        features = {k: data[k] for k in data.files if not k.startswith("_")}
-        return check_features(features), tuple(int(v) for v in data["_shape"])
-    except (OSError, ValueError, KeyError):
-        return None
+def load_features(path: Path, key) -> tuple[Features, tuple[int, int]] | None:
+    """Stored features under ``key`` and their image's (H, W), or ``None`` (missing, other key, unreadable)."""
+    found = store.load(path, key)
+    return None if found is None else (found[0], found[1][::-1])
 
 
 def scene_features(scene: Scene, spec: str, out: Path, progress: bool = True,
                    extractor=None) -> tuple[list[Features], list[tuple[int, int]]]:
     """Features and image size (H, W) of each item's common frame; writes ``out/images/<name>.png`` too."""
     features, shapes = [], []
+    method = store.method_key(spec)
     for item in tqdm(scene.items, desc=f"features {spec}", disable=not progress, leave=False):
         cache = out / "features" / f"{_safe_name(item.name)}.npz"
         image_path = out / "images" / f"{item.name}.png"
-        cached = load_features(cache, spec)
-        if cached is not None and image_path.is_file():
+        key = store.burst_key(method, item.path)  # the burst's content and the weights: no stale features
+        cached = store.load(cache, key)
+        if cached is not None and image_path.is_file() and cached[2].get("image_sha1") == file_sha1(image_path):
             features.append(cached[0])
-            shapes.append(cached[1])
+            shapes.append(cached[1][::-1])
             continue
         burst = load_item(item)
         common = burst[len(burst) // 2]
@@ -206,10 +201,10 @@ def scene_features(scene: Scene, spec: str, out: Path, progress: bool = True,
 
                 extractor = create(spec)
             feats = check_features(extractor(burst))
-            save_features(cache, feats, spec, common.shape[:2])
         else:
             feats = cached[0]
-        features.append(feats)
+        save_features(cache, feats, key, common.shape[:2], image_sha1=file_sha1(image_path))
+        features.append(load_features(cache, key)[0])  # as stored, so a rerun gives the same
         shapes.append(common.shape[:2])
     return features, shapes
 
@@ -227,7 +222,7 @@ def recording_features(path: str | Path, spec: str, out: Path, opts: Reconstruct
         recording = open_recording(path, opts.recording or RecordingOptions())
     except BurstError as err:
         raise ReconstructionError(str(err)) from err
-    key = f"{spec}|{rec.cache_key(recording)}"
+    key = f"{store.method_key(spec)['spec']}|{rec.cache_key(recording)}"
 
     def paths(name: str) -> tuple[Path, Path]:
         return out / "features" / f"{_safe_name(name)}.npz", out / "images" / f"{name}.png"
