@@ -96,3 +96,26 @@ def test_bad_arguments():
         estimate_shifts(burst, method="sift")
     with pytest.raises(ValueError, match="motion model"):
         estimate_shifts(burst, motion="affine")
+
+
+def test_align_wrapper_removes_the_burst_motion_before_the_inner_method():
+    from lburst.methods.merge import align_burst
+
+    burst = moving_burst(VELOCITY, 10.0)
+    aligned = align_burst(burst)
+    np.testing.assert_array_equal(aligned[2], burst[2])
+    inner = (slice(16, -16), slice(16, -16))
+    before = np.abs(burst[0].astype(float) - burst[2])[inner].mean()
+    after = np.abs(aligned[0].astype(float) - aligned[2])[inner].mean()
+    assert after < 0.5 * before  # what is left is the noise of two frames
+    seen = {}
+
+    def inner_method(b):
+        seen["burst"] = b
+        return {"keypoints": np.zeros((0, 2), np.float32)}
+
+    extractor = create("align+sift")
+    extractor.inner = inner_method
+    extractor(burst)
+    np.testing.assert_array_equal(seen["burst"], aligned)
+    assert create("align,method=phase+lburst").method == "phase"

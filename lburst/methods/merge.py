@@ -116,3 +116,47 @@ class MergeOptions:
 def merge(inner: Extractor, options: MergeOptions) -> MergeThen:
     """Burst with Merge: align and average the frames, then run SPEC on the merged image."""
     return MergeThen(inner, method=options.method, motion=options.motion, reduce=options.reduce)
+
+
+def align_burst(burst: np.ndarray, shifts: np.ndarray | None = None, method: Method = "ecc",
+                motion: Motion = "linear") -> np.ndarray:
+    """Every frame resampled onto the common frame (bilinear, replicated borders), rounded
+    to the burst's dtype: the burst as it would be without its motion (the estimated
+    shifts unless ``shifts`` are given).  The common frame is returned untouched."""
+    burst = check_burst(burst)
+    if shifts is None:
+        shifts = estimate_shifts(burst, method=method, motion=motion)
+    top = dtype_max(burst.dtype)
+    out = burst.copy()
+    for k in range(len(burst)):
+        if np.any(shifts[k] != 0):
+            out[k] = np.clip(np.rint(warp_frame(burst[k], np.asarray(shifts[k]))), 0, top).astype(burst.dtype)
+    return out
+
+
+class AlignThen:
+    """Extractor: align the burst's frames onto the common frame (:func:`align_burst`),
+    then run the burst method ``inner`` on the aligned burst."""
+
+    def __init__(self, inner: Extractor, method: Method = "ecc", motion: Motion = "linear") -> None:
+        self.inner = inner
+        self.method = method
+        self.motion = motion
+        self.name = f"align+{getattr(inner, 'name', type(inner).__name__)}"
+
+    def __call__(self, burst: np.ndarray) -> Features:
+        return self.inner(align_burst(burst, method=self.method, motion=self.motion))
+
+
+@dataclass(frozen=True)
+class AlignOptions:
+    """Alignment ``method`` and ``motion`` model of the shifts, as for ``merge``."""
+
+    method: Literal["phase", "ecc"] = "ecc"
+    motion: Literal["free", "linear"] = "linear"
+
+
+@register("align", AlignOptions, wraps=True)
+def align(inner: Extractor, options: AlignOptions) -> AlignThen:
+    """Align the burst's frames onto the common frame, then run the burst method SPEC on it."""
+    return AlignThen(inner, method=options.method, motion=options.motion)
