@@ -27,8 +27,8 @@ from tqdm import tqdm
 
 from lburst.io import atomic_path
 from lburst.paths import shared_dir
-from lburst.model import (AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, LBurstNet, NetConfig, autocast_dtype,
-                          load_checkpoint, save_checkpoint)
+from lburst.model import (AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, CheckpointError, LBurstNet, NetConfig,
+                          autocast_dtype, load_checkpoint, save_checkpoint)
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
 from lburst.train.losses import (APSampling, cosim_loss, distillation_loss, logit_margin_loss, peaky_loss,
@@ -237,8 +237,10 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     step, seconds = 0, 0.0
     generator = torch.Generator().manual_seed(cfg.seed + ctx.rank)
     state = None
-    if resume and last.is_file():
-        state = torch.load(last, map_location="cpu", weights_only=True)
+    if resume and not last.is_file():
+        raise CheckpointError(f"{last}: no run to resume (no such file); leave out --resume to start one")
+    if resume:
+        state = load_state(last)
         saved = _config_from_dict(dict(state["config"]))
         cfg = replace(saved, time_budget_s=cfg.time_budget_s, steps=cfg.steps, epochs=cfg.epochs,
                       workers=cfg.workers, threads=cfg.threads, checkpoint_every_s=cfg.checkpoint_every_s,
@@ -247,6 +249,8 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
         raise FileExistsError(f"{last} exists: pass --resume to continue it, or choose another --out")
     photos = list_photos([Path(p) for p in photo_folders])
     total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / (cfg.batch_size * ctx.world))
+    if total < 1:
+        raise ValueError(f"a run needs at least 1 step, got {total} (--steps, or --epochs x photos / batch)")
     torch.manual_seed(cfg.seed)
     net = LBurstNet(NetConfig(frames=cfg.frames))
     if cfg.init and state is None:
@@ -383,14 +387,51 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device")
 
 
-def config_from_args(args: argparse.Namespace) -> TrainConfig:
-    cfg = replace(TrainConfig(), **PRESETS[args.preset])
-    overrides = {"frames": args.frames, "steps": args.steps, "batch_size": args.batch_size,
+def load_state(path: Path) -> dict:
+    """The resumable state in ``last.pt``; ``CheckpointError`` naming the file if it is unreadable."""
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # truncated, empty, not a torch file
+        raise CheckpointError(f"{path}: not a readable training state ({type(exc).__name__}: {exc}); "
+                              f"restore it or start a new run in another --out") from exc
+    missing = [k for k in ("state_dict", "optimizer", "step", "config") if not isinstance(state, dict) or k not in state]
+    if missing:
+        raise CheckpointError(f"{path}: not a training state (lacks {', '.join(missing)})")
+    return state
+
+
+#: Settings that a resumed run takes from the command line; the others stay the run's own.
+RESUME_OVERRIDES = ("steps", "epochs", "time_budget_s", "workers", "threads", "checkpoint_every_s",
+                    "snapshot_every", "tensorboard")
+
+
+def check_resume_options(out: str | Path, given: dict) -> None:
+    """``ValueError`` for an option given with ``--resume`` that the resumed run would ignore
+    (its value differs from the one in the run's ``config.json``)."""
+    try:
+        saved = json.loads((Path(out) / "config.json").read_text())
+    except (OSError, ValueError):
+        return  # no record to compare with; the run's last.pt is checked when it is loaded
+    ignored = [f"--{name.removesuffix('_s').replace('_', '-')} {value} (the run has {saved[name]})"
+               for name, value in given.items()
+               if value is not None and name not in RESUME_OVERRIDES and name in saved and saved[name] != value]
+    if ignored:
+        raise ValueError(f"{out}: a resumed run keeps its own settings; leave out {', '.join(ignored)}")
+
+
+def given_options(args: argparse.Namespace) -> dict:
+    """The TrainConfig fields set on the command line (``None``: not given)."""
+    return {"frames": args.frames, "steps": args.steps, "batch_size": args.batch_size,
                  "time_budget_s": args.time_budget, "workers": args.workers, "threads": args.threads,
                  "seed": args.seed, "precision": args.precision, "snapshot_every": args.snapshot_every,
                  "tensorboard": args.tensorboard or None, "rel_logit_weight": args.rel_logit_weight,
                  "distill_weight": args.distill_weight, "init": args.init,
                  "checkpoint_every_s": args.checkpoint_every}
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    cfg = replace(TrainConfig(), **PRESETS[args.preset])
+    overrides = given_options(args)
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
     if args.frames is not None:
@@ -405,6 +446,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 def main(args: argparse.Namespace) -> int:
     data = args.data or [str(shared_dir() / "data" / "train")]
     cfg = config_from_args(args)
+    if args.resume:
+        check_resume_options(args.out, given_options(args))
     last = train(data, args.out, cfg, resume=args.resume, device=args.device)
     print(f"checkpoint: {last}")
     return 0

@@ -1,0 +1,54 @@
+"""``lburst train`` refuses what would silently do the wrong thing: resuming a run that is
+not there, a run of no steps, an unreadable ``last.pt`` (named), and options a resumed run ignores."""
+
+import argparse
+import json
+
+import cv2
+import pytest
+import skimage.data
+
+from lburst.model import CheckpointError
+from lburst.train.loop import TrainConfig, check_resume_options, configure_parser, given_options, train
+from lburst.train.pairs import PairConfig
+
+TINY = PairConfig(frames=3, crop=64, long_side=(160, 256), max_burst_motion=6, max_pair_shift=6)
+CFG = TrainConfig(frames=3, batch_size=1, steps=1, patch=8, workers=0, pair=TINY)
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("photos")
+    cv2.imwrite(str(folder / "astronaut.png"), cv2.cvtColor(skimage.data.astronaut(), cv2.COLOR_RGB2BGR))
+    return folder
+
+
+def test_resume_of_a_missing_run_is_an_error_not_a_new_run(photos, tmp_path):
+    with pytest.raises(CheckpointError, match="last.pt: no run to resume"):
+        train([photos], tmp_path / "nowhere", CFG, resume=True, progress=False)
+    assert not (tmp_path / "nowhere").exists()
+
+
+def test_zero_steps_write_no_untrained_final_checkpoint(photos, tmp_path):
+    with pytest.raises(ValueError, match="at least 1 step"):
+        train([photos], tmp_path / "run", TrainConfig(**{**CFG.__dict__, "steps": 0}), progress=False)
+    assert not (tmp_path / "run" / "final.pt").exists()
+
+
+@pytest.mark.parametrize("content", [b"", b"PK\x03\x04 truncated zip"])
+def test_an_unreadable_last_pt_is_named(photos, tmp_path, content):
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "last.pt").write_bytes(content)
+    with pytest.raises(CheckpointError, match=r"run/last.pt: not a readable training state"):
+        train([photos], tmp_path / "run", CFG, resume=True, progress=False)
+
+
+def test_options_a_resumed_run_would_ignore_are_refused(tmp_path):
+    (tmp_path / "config.json").write_text(json.dumps({"frames": 5, "batch_size": 4, "steps": 100}))
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    args = parser.parse_args(["--out", str(tmp_path), "--resume", "--frames", "1", "--steps", "200"])
+    with pytest.raises(ValueError, match=r"leave out --frames 1 \(the run has 5\)"):
+        check_resume_options(tmp_path, given_options(args))
+    same = parser.parse_args(["--out", str(tmp_path), "--resume", "--frames", "5", "--steps", "200"])
+    check_resume_options(tmp_path, given_options(same))  # more steps, same frames: fine
