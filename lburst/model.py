@@ -25,7 +25,7 @@ size and the last row/column can never hold a keypoint, as in the published code
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import replace, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -231,6 +231,22 @@ def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tup
     net.eval().to(device)
     extra = {k: v for k, v in ckpt.items() if k != "state_dict"}
     return net, extra
+
+
+def replicate_frames(net: LBurstNet, frames: int) -> LBurstNet:
+    """A ``frames``-frame network made from a single-image ``net``: the first convolution's
+    weights are copied to every frame and divided by ``frames``.  Since every frame is
+    normalised alike, the result on a burst equals ``net`` on the burst's mean, exactly
+    (up to float rounding): on an aligned burst it starts as "average, then the
+    single-image network", and training can only teach it more than averaging."""
+    if net.config.frames != 1:
+        raise ValueError(f"replicate_frames takes a single-image network, got {net.config.frames} frames")
+    wide = LBurstNet(replace(net.config, frames=frames))
+    state = {k: v.clone() for k, v in net.state_dict().items()}
+    first = "ops.0.weight"
+    state[first] = state[first].repeat(1, frames, 1, 1) / frames
+    wide.load_state_dict(state)
+    return wide
 
 
 def save_checkpoint(net: LBurstNet, path: str | Path, meta: dict | None = None) -> None:

@@ -296,3 +296,34 @@ def test_sigterm_stops_a_run_like_ctrl_c_keeping_its_finished_steps(photos, tmp_
         train([photos], tmp_path, cfg, progress=False)
     assert torch.load(tmp_path / "last.pt", weights_only=True)["step"] <= 3
     assert signal.getsignal(signal.SIGTERM) is before  # the handler is put back
+
+
+def test_a_burst_network_replicated_from_a_single_image_one_equals_it_on_the_mean():
+    from lburst.model import replicate_frames
+
+    torch.manual_seed(0)
+    single = LBurstNet(NetConfig(frames=1)).eval()
+    wide = replicate_frames(single, 5).eval()
+    x = torch.randn(2, 15, 48, 56)
+    a, b = wide(x), single(x.view(2, 5, 3, 48, 56).mean(1))
+    for key in a:
+        torch.testing.assert_close(a[key], b[key], atol=1e-5, rtol=1e-4)
+    with pytest.raises(ValueError, match="single-image"):
+        replicate_frames(wide, 3)
+
+
+def test_aligned_preset_frames_are_warped_back_onto_the_common_frame(photos):
+    from lburst.train.loop import PRESETS
+
+    base = replace(PRESETS["burst"]["pair"], crop=96, long_side=(200, 256), max_pair_shift=6, noise_std=(0.0, 0.0),
+                   lowlight_prob=0.0, burst_rotation_deg=0.0, burst_zoom=0.0, burst_flow_px=0.0)
+    photo_list = list_photos([photos], split="all")
+    moving = PairDataset(photo_list, base, seed=1)[0]["burst_a"]
+    aligned = PairDataset(photo_list, replace(base, align_error_px=0.0), seed=1)[0]["burst_a"]
+    inner = (slice(None), slice(8, -8), slice(8, -8))
+
+    def spread(burst):  # how far the frames are from the common one
+        return float((burst[0][inner] - burst[2][inner]).abs().mean())
+
+    assert torch.equal(moving[2], aligned[2])
+    assert spread(aligned) < 0.3 * spread(moving)

@@ -28,7 +28,7 @@ from tqdm import tqdm
 from lburst.io import atomic_path
 from lburst.paths import shared_dir
 from lburst.model import (AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, CheckpointError, LBurstNet, NetConfig,
-                          autocast_dtype, load_checkpoint, save_checkpoint)
+                          autocast_dtype, load_checkpoint, replicate_frames, save_checkpoint)
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
 from lburst.train.losses import (APSampling, cosim_loss, distillation_loss, logit_margin_loss, peaky_loss,
@@ -64,7 +64,9 @@ class TrainConfig:
     noise invariance directly (:func:`lburst.train.losses.distillation_loss`).
 
     ``init`` starts the weights from a checkpoint of this project's own (for example the
-    shipped ``lburst-b5``) instead of at random; the optimizer starts fresh.
+    shipped ``lburst-b5``) instead of at random; the optimizer starts fresh.  A
+    single-image checkpoint starts a burst run through :func:`lburst.model.replicate_frames`
+    (the burst network that equals the single-image one on the burst's mean).
 
     ``tensorboard`` also writes the losses for TensorBoard to ``tensorboard/`` in the run.
 
@@ -123,6 +125,12 @@ PRESETS["burst"] = dict(
                     max_burst_motion=12.0, burst_rotation_deg=1.0, burst_zoom=0.01, burst_flow_px=1.0,
                     lowlight_prob=0.33, lowlight_photons=(3.0, 60.0)),
 )
+#: ``aligned``: the ``burst`` recipe for a network that reads bursts aligned by
+#: ``align+lburst``: every training frame is warped back by its shift plus a 0.25 px
+#: error, so what is left is the rotation, zoom and flow; start it from the shipped
+#: single-image weights (``--init lburst/weights/lburst-b1.pt``), which it then equals on
+#: the burst's mean.
+PRESETS["aligned"] = dict(PRESETS["burst"], pair=replace(PRESETS["burst"]["pair"], align_error_px=0.25))
 
 
 def _normalise(burst: torch.Tensor) -> torch.Tensor:
@@ -255,6 +263,8 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     net = LBurstNet(NetConfig(frames=cfg.frames))
     if cfg.init and state is None:
         init_net, _ = load_checkpoint(cfg.init)
+        if init_net.config.frames == 1 and cfg.frames > 1:
+            init_net = replicate_frames(init_net, cfg.frames)
         if init_net.config.frames != cfg.frames:
             raise ValueError(f"{cfg.init}: a {init_net.config.frames}-frame network, but the run has {cfg.frames} frames")
         net.load_state_dict(init_net.state_dict())

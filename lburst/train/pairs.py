@@ -43,6 +43,10 @@ class PairConfig:
             translation (:class:`lburst.motion.BurstMotion`): largest rotation per frame,
             largest relative zoom per frame, largest std of the smooth non-uniform flow
             per frame (drawn uniformly per burst).
+        align_error_px: if not None, every noisy frame is warped back onto the common
+            frame by the translation part of its motion plus a Gaussian error of this std
+            (bilinear, replicated borders), as ``align+SPEC`` does with estimated shifts
+            at inference: the network then learns to fuse and detect, not to align.
         lowlight_prob, lowlight_photons: probability of physical low-light noise
             (:class:`lburst.noise.LowLightNoise`, photons at white drawn log-uniformly
             in the range) instead of the Gaussian noise.
@@ -66,6 +70,7 @@ class PairConfig:
     burst_flow_px: float = 0.0
     lowlight_prob: float = 0.0
     lowlight_photons: tuple[float, float] = (3.0, 60.0)
+    align_error_px: float | None = None
 
 
 @dataclass
@@ -183,6 +188,26 @@ def _render(photo: np.ndarray, to_photo: np.ndarray, crop: int, motion: BurstMot
     return out
 
 
+def _estimated_shifts(motion: BurstMotion, cfg: PairConfig, rng: np.random.Generator) -> np.ndarray:
+    """``(N, 2)`` shifts of the frames as an aligner would find them: the translation
+    part of ``motion`` plus a Gaussian error (none for the common frame)."""
+    k = np.arange(cfg.frames) - cfg.frames // 2
+    shifts = k[:, None] * np.asarray(motion.shift)[None] + rng.normal(0, cfg.align_error_px, (cfg.frames, 2))
+    shifts[cfg.frames // 2] = 0
+    return shifts
+
+
+def _align(frames: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Frames warped back by ``shifts`` (``out(p) = frame(p + shift)``), rounded and clipped."""
+    from lburst.methods.merge import warp_frame
+
+    out = frames.copy()
+    for i, shift in enumerate(shifts):
+        if np.any(shift != 0):
+            out[i] = np.clip(np.round(warp_frame(frames[i], shift)), 0, 255)
+    return out
+
+
 def training_pair(photo: np.ndarray, rng: np.random.Generator, cfg: PairConfig = PairConfig()) -> TrainingPair:
     """Draw one training pair from ``photo`` (H, W, 3) uint8 RGB."""
     if photo.ndim != 3 or photo.shape[2] != 3:
@@ -196,11 +221,17 @@ def training_pair(photo: np.ndarray, rng: np.random.Generator, cfg: PairConfig =
     a_to_photo = _translation(ox, oy)
     g = random_homography(rng, cfg)
     b_to_photo = a_to_photo @ np.linalg.inv(g)
-    burst_a = _render(photo, a_to_photo, crop, _burst_motion(rng, cfg), cfg.frames)
-    burst_b = _render(photo, b_to_photo, crop, _burst_motion(rng, cfg), cfg.frames)
+    motion_a, motion_b = _burst_motion(rng, cfg), _burst_motion(rng, cfg)
+    burst_a = _render(photo, a_to_photo, crop, motion_a, cfg.frames)
+    burst_b = _render(photo, b_to_photo, crop, motion_b, cfg.frames)
     clean_a = _exposure(burst_a, rng, cfg)
     burst_a = _noise(clean_a, rng, cfg)
     burst_b = _noise(_exposure(burst_b, rng, cfg), rng, cfg)
+    if cfg.align_error_px is not None:
+        shifts_a = _estimated_shifts(motion_a, cfg, rng)
+        clean_a = _align(np.clip(np.round(clean_a), 0, 255), shifts_a)
+        burst_a = _align(burst_a, shifts_a)
+        burst_b = _align(burst_b, _estimated_shifts(motion_b, cfg, rng))
     ys, xs = np.mgrid[0:crop, 0:crop].astype(np.float64)
     pts = np.stack([xs, ys, np.ones_like(xs)], -1) @ g.T
     flow = (pts[..., :2] / pts[..., 2:]).astype(np.float32)
