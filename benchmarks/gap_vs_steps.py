@@ -6,6 +6,9 @@ runs' current ``last.pt``, and the ``--also`` methods, all in one benchmark run.
         --data ../shared/data/homography --sigma 50 100 --also lburst r2d2 sift \\
         --out outputs/gap_vs_steps
 
+A run trained on aligned bursts (``--preset aligned``) is measured as ``align+lburst:CKPT``
+with ``--wrap align+``.
+
 The reference defaults to the published ``RoBLo_N16_B5.pt`` (in
 ``$LBURST_SHARED/anchors``) in the frame order it was trained with, its best setting.
 Prints one row per checkpoint: MMA@3 and MMA@1 per noise level and the MMA@3 difference
@@ -55,13 +58,15 @@ def main() -> int:
     p.add_argument("--sigma", type=float, nargs="+", default=[50, 100])
     p.add_argument("--reference", help="method spec to measure the gap to (default: the published RoBLo_N16_B5)")
     p.add_argument("--steps", type=int, nargs="*", help="only the runs' checkpoints at these steps")
+    p.add_argument("--wrap", default="", metavar="WRAPPER+",
+                   help="wrapper spec put before each run's checkpoint, e.g. 'align+' for a run trained on aligned bursts")
     p.add_argument("--also", nargs="*", default=[], help="more method specs, as rows (e.g. lburst r2d2 sift)")
     p.add_argument("--out", type=Path, default=Path("outputs/gap_vs_steps"))
     args = p.parse_args()
     data = args.data or shared_dir() / "data" / "homography"
     reference = args.reference or f"lburst:{shared_dir() / 'anchors' / 'RoBLo_N16_B5.pt'},frame_order=published"
     try:
-        rows = [(run.name, step, f"lburst:{path}") for run in args.runs for step, path in run_checkpoints(run)
+        rows = [(run.name, step, f"{args.wrap}lburst:{path}") for run in args.runs for step, path in run_checkpoints(run)
                 if not args.steps or step in args.steps]
         for spec in args.also:
             path = weights_file(spec)
