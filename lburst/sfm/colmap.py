@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import re
 import shutil
 import subprocess
 import sys
@@ -32,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from lburst.extras import LazyModule
+from lburst.process import die_with_parent, folder_lock
 
 # Imported on first use, after cv2 (see the module docstring), so that importing this
 # module loads neither pycolmap nor OpenCV (nor torch: the child never needs it).
@@ -326,25 +329,66 @@ def run_job_subprocess(job_dir: str | Path, timeout: float | None = None) -> dic
     Raises ``ColmapError`` with the end of the log when the child fails or aborts.
     """
     job_dir = Path(job_dir)
-    (job_dir / "output.json").unlink(missing_ok=True)
-    log_path = job_dir / "colmap.log"
-    with open(log_path, "w") as log:
-        try:
-            proc = subprocess.run([sys.executable, "-m", "lburst.sfm.colmap", str(job_dir)], stdout=log,
-                                  stderr=subprocess.STDOUT, timeout=timeout)
-        except subprocess.TimeoutExpired as err:
-            raise ColmapError(f"COLMAP did not finish in {timeout} s (log: {log_path})") from err
-    if proc.returncode != 0 or not (job_dir / "output.json").is_file():
-        tail = "".join(log_path.read_text(errors="replace").splitlines(keepends=True)[-8:])
-        how = f"was killed by signal {-proc.returncode}" if proc.returncode < 0 else f"exited with {proc.returncode}"
-        raise ColmapError(f"COLMAP {how} (log: {log_path}):\n{tail}")
-    return json.loads((job_dir / "output.json").read_text())
+    with folder_lock(job_dir):  # one COLMAP per job folder; the child dies with this process
+        (job_dir / "output.json").unlink(missing_ok=True)
+        log_path = job_dir / "colmap.log"
+        with open(log_path, "w") as log:
+            try:
+                proc = subprocess.run([sys.executable, "-m", "lburst.sfm.colmap", str(job_dir),
+                                       "--parent", str(os.getpid())], stdout=log, stderr=subprocess.STDOUT,
+                                      timeout=timeout)
+            except subprocess.TimeoutExpired as err:
+                raise ColmapError(f"COLMAP did not finish in {timeout} s (log: {log_path})") from err
+        if proc.returncode != 0 or not (job_dir / "output.json").is_file():
+            how = f"was killed by signal {-proc.returncode}" if proc.returncode < 0 else f"exited with {proc.returncode}"
+            raise ColmapError(f"COLMAP {how} (log: {log_path}):\n{failure_summary(log_path.read_text(errors='replace'))}")
+        return json.loads((job_dir / "output.json").read_text())
+
+
+def failure_summary(log: str, lines: int = 8) -> str:
+    """What a failed COLMAP log says went wrong: its ``Check failed:`` line (without glog's
+    prefix) and the message after it, else its last Python error, else its last ``lines`` lines."""
+    rows = log.splitlines()
+    for i, row in enumerate(rows):
+        if "Check failed" in row:
+            text = row[row.index("Check failed"):]
+            following = rows[i + 1].strip() if i + 1 < len(rows) else ""
+            return text if not following or following.startswith("***") else f"{text} {following}"
+    errors = [row for row in rows if re.match(r"^[A-Za-z_.]*(Error|Exception)\b", row)]
+    return errors[-1] if errors else "\n".join(rows[-lines:])
+
+
+def check_camera(camera: dict) -> None:
+    """``ValueError`` for a camera dict COLMAP would abort on: unknown model, bad size, or a
+    parameter count other than the model's."""
+    try:
+        model, width, height, params = camera["model"], camera["width"], camera["height"], camera["params"]
+    except (KeyError, TypeError) as err:
+        raise ValueError(f"a camera needs model, width, height and params (lacks {err})") from None
+    if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (width, height)):
+        raise ValueError(f"width and height must be positive integers, got {width!r} x {height!r}")
+    try:
+        expected = len(pycolmap.Camera.create_from_model_name(0, str(model), 1.0, width, height).params)
+    except Exception:
+        raise ValueError(f"unknown camera model {model!r}") from None
+    values = np.asarray(params, dtype=object)
+    if values.ndim != 1 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+                                   for v in values):
+        raise ValueError(f"params must be a list of finite numbers, got {params!r}")
+    if len(values) != expected:
+        raise ValueError(f"{model} takes {expected} params, got {len(values)}")
+    if values[0] <= 0:
+        raise ValueError(f"the focal length must be positive, got {values[0]}")
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Run one COLMAP job folder (internal to lburst reconstruct).")
     parser.add_argument("job_dir")
-    run_job(parser.parse_args(argv).job_dir)
+    parser.add_argument("--parent", type=int, help="die when this process does (the lburst parent)")
+    args = parser.parse_args(argv)
+    if args.parent:
+        die_with_parent(args.parent)
+    run_job(args.job_dir)
     return 0
 
 

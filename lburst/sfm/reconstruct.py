@@ -259,17 +259,37 @@ def recording_features(path: str | Path, spec: str, out: Path, opts: Reconstruct
     return rec.keyframe_scene(recording, keyframes, out), features, shapes, error
 
 
+def check_reference(path: Path) -> dict[str, dict]:
+    """The cameras of a scene's ``reference.json`` after checking the whole file (poses and
+    every camera against its COLMAP model), so that a bad one fails before COLMAP runs;
+    ``ReconstructionError`` naming the file and the problem."""
+    from lburst.sfm.colmap import check_camera
+    from lburst.sfm.reference import Reference
+
+    try:
+        Reference.load(path)
+        cameras = reference_cameras(path)
+    except (ValueError, KeyError, TypeError, AttributeError) as err:
+        raise ReconstructionError(f"{path}: malformed reference file ({err})") from err
+    for name, camera in cameras.items():
+        try:
+            check_camera(camera)
+        except ValueError as err:
+            raise ReconstructionError(f"{path}: camera of image {name!r}: {err}") from err
+    return cameras
+
+
 def scene_cameras(scene: Scene, shapes: list[tuple[int, int]], options: ReconstructOptions) -> tuple[list[dict], list[int]]:
     """COLMAP camera priors (distinct dicts) and the camera index of every image (module docstring)."""
     from lburst.sfm.colmap import default_camera, exif_camera
 
-    ref_cams = None
-    if options.camera == "reference":
-        if scene.reference_path is None:
-            raise ReconstructionError(f"{scene.root}: camera='reference' but the scene has no reference.json")
-        ref_cams = reference_cameras(scene.reference_path)
-    elif options.camera not in ("auto", "default"):
+    if options.camera not in ("auto", "default", "reference"):
         raise ReconstructionError(f"unknown camera option {options.camera!r}: expected auto, default or reference")
+    if options.camera == "reference" and scene.reference_path is None:
+        raise ReconstructionError(f"{scene.root}: camera='reference' but the scene has no reference.json")
+    ref_cams = None if scene.reference_path is None else check_reference(scene.reference_path)
+    if options.camera != "reference":
+        ref_cams = None
     priors = []
     for item, (h, w) in zip(scene.items, shapes):
         camera = None
