@@ -22,7 +22,7 @@ import torch.nn.functional as F
 
 from lburst.fast import FastLBurstNet, descriptors_at
 from lburst.features import Features
-from lburst.model import LBurstNet, load_checkpoint, normalize_burst
+from lburst.model import LBurstNet, check_device, check_precision, load_checkpoint, normalize_burst
 
 
 @dataclass(frozen=True)
@@ -144,15 +144,20 @@ class LBurst:
         frame_order: str = "temporal",
         runner: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor]] | None = None,
         frames: int | None = None,
+        align: bool = False,
     ) -> None:
         """``net``: the network; or ``runner`` (with ``frames``): any callable with the
-        signature of :meth:`lburst.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session."""
+        signature of :meth:`lburst.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session.
+        ``align``: warp the frames onto the common frame with their estimated shifts
+        before the network (:func:`lburst.methods.merge.align_burst`), for weights trained
+        on aligned bursts (their checkpoint says ``meta['input'] == 'aligned'``)."""
         if net is None and runner is None:
             raise ValueError("give a network or a runner")
-        self.device = torch.device(device)
+        self.device = check_device(device)
         self.net = net.eval().to(self.device) if net is not None else None
         self.frames = net.config.frames if net is not None else int(frames)
         self.frame_order = frame_order
+        self.align = bool(align) and self.frames > 1
         self._perm = frame_permutation(self.frames, frame_order)
         self._runner = runner
         self._reduced: dict[str, FastLBurstNet] = {}
@@ -168,6 +173,7 @@ class LBurst:
         if precision == "fp32" or self.net is None:
             return self.fast_net(x)
         if precision not in self._reduced:
+            check_precision(precision, self.device)
             self._reduced[precision] = FastLBurstNet(self.net, precision).to(self.device).eval()
         return self._reduced[precision](x)
 
@@ -181,12 +187,17 @@ class LBurst:
 
     @classmethod
     def from_checkpoint(
-        cls, path: str | Path, device: str | torch.device | None = None, frame_order: str = "temporal"
+        cls, path: str | Path, device: str | torch.device | None = None, frame_order: str = "temporal",
+        align: bool | None = None,
     ) -> "LBurst":
-        """Load a published or lburst checkpoint (see :func:`lburst.model.load_checkpoint`)."""
-        device = device or ("cuda" if torch.cuda.is_available() else "cpu")
-        net, _ = load_checkpoint(path, device)
-        return cls(net, device, frame_order)
+        """Load a published or lburst checkpoint (see :func:`lburst.model.load_checkpoint`).
+        ``align`` defaults to what the checkpoint's ``meta['input']`` says."""
+        device = check_device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        net, extra = load_checkpoint(path, device)
+        if align is None:
+            meta = extra.get("meta")
+            align = isinstance(meta, dict) and meta.get("input") == "aligned"
+        return cls(net, device, frame_order, align=align)
 
     @classmethod
     def pretrained(cls, name: str = "lburst-b5", device: str | torch.device | None = None) -> "LBurst":
@@ -207,6 +218,15 @@ class LBurst:
                 burst = burst[n // 2 : n // 2 + 1]  # single-image net: the common frame
             else:
                 raise ValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
+        if self.align:
+            from lburst.methods.merge import align_burst
+            from lburst.model import check_float_burst
+
+            if np.issubdtype(burst.dtype, np.floating):  # aligned on a 16-bit copy
+                check_float_burst(burst)
+                burst = align_burst(np.round(burst * 65535).astype(np.uint16)).astype(np.float32) / 65535
+            else:
+                burst = align_burst(burst)
         return normalize_burst(burst[self._perm], self.device)
 
     @torch.inference_mode()

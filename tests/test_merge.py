@@ -119,3 +119,23 @@ def test_align_wrapper_removes_the_burst_motion_before_the_inner_method():
     extractor(burst)
     np.testing.assert_array_equal(seen["burst"], aligned)
     assert create("align,method=phase+lburst").method == "phase"
+
+
+def test_weights_trained_on_aligned_bursts_align_them_before_the_network(tmp_path):
+    from lburst.extract import LBurst
+    from lburst.methods.merge import align_burst
+    from lburst.model import load_checkpoint, save_checkpoint
+    from lburst.weights import weights_path
+
+    net, _ = load_checkpoint(weights_path("lburst-b5"))
+    save_checkpoint(net, tmp_path / "aligned.pt", meta={"input": "aligned"})
+    save_checkpoint(net, tmp_path / "plain.pt", meta={"step": 1})
+    burst = moving_burst(VELOCITY, 10.0, size=96)
+    aligned_model = LBurst.from_checkpoint(tmp_path / "aligned.pt", device="cpu")
+    plain_model = LBurst.from_checkpoint(tmp_path / "plain.pt", device="cpu")
+    assert aligned_model.align and not plain_model.align
+    ours = aligned_model.dense(burst)["descriptors"]
+    np.testing.assert_allclose(ours, plain_model.dense(align_burst(burst))["descriptors"], atol=1e-5)
+    assert np.abs(ours - plain_model.dense(burst)["descriptors"]).mean() > 1e-3
+    floats = aligned_model.dense(burst.astype(np.float32) / 255)["descriptors"]
+    assert np.abs(floats - ours).mean() < 0.1 * np.abs(ours - plain_model.dense(burst)["descriptors"]).mean()

@@ -28,7 +28,8 @@ from tqdm import tqdm
 from lburst.io import atomic_path
 from lburst.paths import shared_dir
 from lburst.model import (AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, CheckpointError, LBurstNet, NetConfig,
-                          autocast_dtype, load_checkpoint, replicate_frames, save_checkpoint)
+                          autocast_dtype, check_device, check_precision, load_checkpoint,
+                          replicate_frames, save_checkpoint)
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
 from lburst.train.losses import (APSampling, cosim_loss, distillation_loss, logit_margin_loss, peaky_loss,
@@ -237,7 +238,8 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     (:mod:`lburst.train.distributed`): each rank draws its own share of the stream and
     rank 0 writes the files."""
     out = Path(out)
-    ctx = distributed.setup(device)
+    ctx = distributed.setup(None if device is None else str(check_device(device)))
+    check_precision(cfg.precision, ctx.device)
     device = ctx.device
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
@@ -328,7 +330,7 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
                 for k in losses:
                     writer.add_scalar(f"train/{k}", values[k], step)
             if cfg.snapshot_every and step % cfg.snapshot_every == 0:
-                save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta={"step": step})
+                save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta={"step": step, **_input_meta(cfg)})
             if time.monotonic() - last_save > cfg.checkpoint_every_s:
                 checkpoint()
                 last_save = time.monotonic()
@@ -343,11 +345,17 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     if ctx.main:
         checkpoint()
         if step >= total:
-            save_checkpoint(net, out / "final.pt", meta={"step": step, "config": _config_dict(cfg)})
+            save_checkpoint(net, out / "final.pt", meta={"step": step, "config": _config_dict(cfg), **_input_meta(cfg)})
     if writer is not None:
         writer.close()
     ctx.close()
     return last
+
+
+def _input_meta(cfg: TrainConfig) -> dict:
+    """``{'input': 'aligned'}`` for weights trained on aligned bursts (:class:`lburst.LBurst`
+    then aligns a burst before the network), else nothing."""
+    return {"input": "aligned"} if cfg.pair.align_error_px is not None else {}
 
 
 def _stop_on_sigterm():
