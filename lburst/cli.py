@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import warnings
 
 # (subcommand words, module, one-line help)
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
@@ -26,9 +28,66 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
 ]
 
 
+#: Help of options that several commands share, for those that give none themselves.
+SHARED_HELP = {
+    "frame_order": "frame order for burst networks ('published' for the published LBurst weights)",
+    "top_k": "keypoints per image (learned methods)",
+    "device": "cpu or cuda (default: cuda if available)",
+    "frames": "frames per burst (odd)",
+    "seed": "random seed (a run with the same seed repeats)",
+    "preset": "training recipe (lburst.train.loop.PRESETS)",
+    "steps": "training steps (default: the preset's)",
+    "batch_size": "bursts per step (default: the preset's)",
+    "workers": "data loader processes (default: the preset's)",
+    "methods": "feature method specs to compare (see lburst methods)",
+    "max_side": "shrink images whose long side is longer than this, in pixels",
+    "out": "output folder",
+    "pairs": "image pairs to match (auto: exhaustive for up to 20 images, else sequential)",
+    "overlap": "sequential pairs: neighbours on each side",
+    "fallback_exhaustive": "rerun with all pairs when sequential pairs leave images unregistered",
+    "mapper": "COLMAP's incremental mapper or the global one (GLOMAP)",
+    "camera": "intrinsics prior: EXIF or default (auto), default, or the scene's reference.json",
+    "camera_model": "COLMAP camera model of the priors",
+    "threads": "COLMAP threads",
+    "bursts": "number of bursts",
+    "opset": "ONNX opset version",
+}
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Each option's help ends with its default, unless the default is None or False or
+    the help already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if (action.default in (None, False, argparse.SUPPRESS) or "default" in text or "%(default)" in text
+                or (not action.option_strings and action.nargs not in ("?", "*"))):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("lburst")
+    except PackageNotFoundError:
+        import lburst
+
+        return lburst.__version__
+
+
+def _fill_help(parser: argparse.ArgumentParser) -> None:
+    for action in parser._actions:
+        if not action.help and action.dest in SHARED_HELP:
+            action.help = SHARED_HELP[action.dest]
+
+
 def build_parser(load: tuple[str, ...] | None = None) -> argparse.ArgumentParser:
     """The parser; only the subcommand ``load`` has its module imported for its options."""
-    parser = argparse.ArgumentParser(prog="lburst", description="Features from low-light robotic bursts.")
+    parser = argparse.ArgumentParser(prog="lburst", description="Features from low-light robotic bursts.",
+                                     formatter_class=HelpFormatter)
+    parser.add_argument("--version", action="version", version=f"lburst {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     groups: dict[str, argparse._SubParsersAction] = {}
     for words, module, help_text in COMMANDS:
@@ -36,14 +95,30 @@ def build_parser(load: tuple[str, ...] | None = None) -> argparse.ArgumentParser
             target, name = sub, words[0]
         else:
             if words[0] not in groups:
-                group = sub.add_parser(words[0], help=f"{words[0]} subcommands")
+                group = sub.add_parser(words[0], help=f"{words[0]} subcommands", formatter_class=HelpFormatter)
+                group.set_defaults(_group=group)  # without a subcommand: this group's help
                 groups[words[0]] = group.add_subparsers(dest="subcommand", metavar="SUBCOMMAND")
             target, name = groups[words[0]], words[1]
-        p = target.add_parser(name, help=help_text, description=help_text)
+        p = target.add_parser(name, help=help_text, description=help_text, formatter_class=HelpFormatter)
         p.set_defaults(_module=module)
         if load == words:
             importlib.import_module(module).configure_parser(p)
+            _fill_help(p)
     return parser
+
+
+def error_line(exc: BaseException) -> str:
+    """One line for an error from bad input or the operating system: an OSError names its
+    file and says why (``PATH: Permission denied``), anything else is its message."""
+    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
+        where = os.fsdecode(exc.filename) + (f" -> {os.fsdecode(exc.filename2)}" if exc.filename2 else "")
+        return f"{where}: {exc.strerror}"
+    text = str(exc) or type(exc).__name__
+    return " ".join(text.split("\n")[:1]) if isinstance(exc, OSError) else text
+
+
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    return f"lburst: warning: {message}\n"
 
 
 def _words(argv: list[str]) -> tuple[str, ...] | None:
@@ -57,17 +132,28 @@ def main(argv: list[str] | None = None) -> int:
     from lburst.extras import MissingExtra
 
     argv = sys.argv[1:] if argv is None else argv
+    for stream in (sys.stdout, sys.stderr):  # file names that are not valid UTF-8 print escaped
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
+    warnings.formatwarning = _one_line_warning
+    words = _words(argv)
     try:
-        parser = build_parser(_words(argv))
+        parser = build_parser(words)
         args = parser.parse_args(argv)
         if not hasattr(args, "_module"):
-            parser.print_help()
+            getattr(args, "_group", parser).print_help()
             return 2
         module = importlib.import_module(args._module)
         return int(module.main(args) or 0)
     except MissingExtra as exc:  # an optional dependency: the message names the extra to install
         print(f"lburst: {exc}", file=sys.stderr)
         return 2
+    except (OSError, ValueError) as exc:  # bad input or the operating system: one line, no traceback
+        if os.environ.get("LBURST_TRACEBACK"):
+            raise
+        command = " ".join(words or argv[:1])
+        print(f"lburst {command}: error: {error_line(exc)}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("interrupted; finished work is kept and a re-run resumes", file=sys.stderr)
         return 130

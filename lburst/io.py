@@ -33,23 +33,75 @@ def _umask() -> int:
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; rename it onto ``path`` on success.
 
-    A crash or exception leaves any earlier ``path`` untouched and no partial file.  The
-    file gets the permissions a plain ``open(path, "w")`` would give (``mkstemp`` makes
-    it owner-only).
+    A crash or exception leaves any earlier ``path`` untouched and no partial file; the
+    temporary file of a writer that was killed is removed by the next write of ``path``
+    (its name holds the writer's pid).  The file gets the permissions a plain
+    ``open(path, "w")`` would give (``mkstemp`` makes it owner-only).  An ``OSError`` of
+    the write (a read-only folder, a full disk) names ``path``.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp" + path.suffix)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(path)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp" + path.suffix)
+    except OSError as exc:
+        raise _naming(exc, path) from exc
     os.close(fd)
     tmp_path = Path(tmp)
     try:
-        yield tmp_path
-        if tmp_path.exists():
-            os.chmod(tmp_path, 0o666 & ~_umask())
-        os.replace(tmp_path, path)
+        try:
+            yield tmp_path
+            if tmp_path.exists():
+                os.chmod(tmp_path, 0o666 & ~_umask())
+            os.replace(tmp_path, path)
+        except OSError as exc:
+            if exc.filename is None or os.fsdecode(exc.filename) == tmp:
+                raise _naming(exc, path) from exc
+            raise
     finally:
-        if tmp_path.exists():
+        if tmp_path.is_dir():
+            import shutil
+
+            shutil.rmtree(tmp_path, ignore_errors=True)
+        elif tmp_path.exists():
             tmp_path.unlink()
+
+
+def _naming(exc: OSError, path: Path) -> OSError:
+    """``exc`` again, naming ``path`` (the file being written) instead of a temporary name."""
+    return OSError(exc.errno, exc.strerror or str(exc), os.fspath(path))
+
+
+def remove_stale_temporaries(path: str | Path) -> list[Path]:
+    """Remove the temporary files that :func:`atomic_path` left for ``path`` in processes
+    that are gone (killed while writing); returns what was removed."""
+    import glob
+
+    path = Path(path)
+    removed = []
+    for found in glob.glob(glob.escape(os.fspath(path.parent / f".{path.name}.")) + "*.*.tmp*"):
+        pid = Path(found).name[len(path.name) + 2 :].split(".", 1)[0]
+        if not pid.isdigit() or _alive(int(pid)):
+            continue
+        with contextlib.suppress(OSError):
+            if os.path.isdir(found):
+                import shutil
+
+                shutil.rmtree(found)
+            else:
+                os.unlink(found)
+            removed.append(Path(found))
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
 
 
 class BurstError(ValueError):

@@ -25,6 +25,7 @@ size and the last row/column can never hold a keypoint, as in the published code
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import replace, dataclass
 from pathlib import Path
 
@@ -49,6 +50,45 @@ def autocast_dtype(precision: str) -> torch.dtype | None:
 
 #: Class name written into checkpoints, as in the published files.
 NET_NAME = "Fast_Quad_L2Net_ConfCFS"
+
+
+NATIVE_BF16_FLAGS = ("avx512_bf16", "amx_bf16")  # /proc/cpuinfo flags of CPUs with bf16 arithmetic
+
+
+def _cpu_flags() -> set[str] | None:
+    """The CPU's feature flags from ``/proc/cpuinfo``, or ``None`` where it cannot be read."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return None
+    for line in text.splitlines():
+        if line.startswith("flags"):
+            return set(line.split(":", 1)[1].split())
+    return None
+
+
+def check_precision(precision: str, device: torch.device | str) -> None:
+    """Warn when ``bf16`` runs on a CPU without native bf16 (no ``avx512_bf16`` or ``amx_bf16``):
+    it works there, emulated, about 3x slower than fp32."""
+    autocast_dtype(precision)
+    if precision != "bf16" or torch.device(device).type != "cpu":
+        return
+    flags = _cpu_flags()
+    if flags is not None and not flags.intersection(NATIVE_BF16_FLAGS):
+        warnings.warn("--precision bf16 on a CPU without native bf16 (no avx512_bf16 or amx_bf16 in /proc/cpuinfo) "
+                      "runs about 3x slower than fp32", RuntimeWarning, stacklevel=2)
+
+
+def check_device(device: torch.device | str) -> torch.device:
+    """``device`` as a torch device; ``ValueError`` in one line for a bad name or CUDA that is not there."""
+    try:
+        device = torch.device(device)
+    except RuntimeError as exc:
+        raise ValueError(f"device {device!r}: not a torch device (use cpu or cuda)") from exc
+    if device.type == "cuda" and not torch.cuda.is_available():
+        why = "this torch is built without CUDA" if torch.version.cuda is None else "no CUDA GPU is visible"
+        raise ValueError(f"device {device}: CUDA is not available ({why}); use --device cpu")
+    return device
 
 
 class CheckpointError(ValueError):

@@ -306,7 +306,9 @@ def make_night_flight(out_dir: str | Path, cfg: NightFlightConfig = NightFlightC
 def configure_parser(p: argparse.ArgumentParser) -> None:
     """Options of a ``lburst simulate flight``-style command (see :func:`main`)."""
     default = NightFlightConfig()
-    p.add_argument("out", type=Path, nargs="?", help="scene folder of bursts to write (re-running resumes)")
+    p.add_argument("out_dir", type=Path, nargs="?", metavar="OUT",
+                   help="scene folder of bursts to write (re-running resumes)")
+    p.add_argument("--out", type=Path, help="the scene folder OUT, given as an option")
     p.add_argument("--video", type=Path, help="also (or only) write the flight as a continuous MP4 video, with "
                                               "per-frame ground truth X.gt.txt (TUM) and X.meta.json (camera, fps)")
     p.add_argument("--dng", type=Path, help="also (or only) write the flight as a folder of 12-bit Bayer DNG frames "
@@ -331,6 +333,10 @@ def main(args: argparse.Namespace) -> int:
     except ValueError:
         print(f"error: --size must be WIDTHxHEIGHT, got {args.size!r}", file=sys.stderr)
         return 2
+    if args.out is not None and args.out_dir is not None and args.out != args.out_dir:
+        print(f"error: two scene folders given: {args.out_dir} and --out {args.out}", file=sys.stderr)
+        return 2
+    args.out = args.out or args.out_dir
     if args.out is None and args.video is None and args.dng is None:
         print("error: give a scene folder OUT, --video FILE.mp4 or --dng FOLDER", file=sys.stderr)
         return 2

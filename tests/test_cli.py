@@ -1,0 +1,123 @@
+"""The command line: --version, each group's own help, help text and defaults for every
+option, one-line errors (no traceback) for bad input and operating-system errors,
+the bf16 and CUDA checks, and clean-up of temporaries that a killed writer left."""
+
+import errno
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from lburst import model as model_module
+from lburst.cli import COMMANDS, build_parser, main
+from lburst.io import atomic_path, remove_stale_temporaries, save_burst
+
+RUN_CLI = "import sys; from lburst.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-c", RUN_CLI, *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0 and capsys.readouterr().out.startswith("lburst 0.")
+
+
+@pytest.mark.parametrize("group", ["simulate", "bench", "export"])
+def test_a_group_without_its_subcommand_prints_its_own_help(group, capsys):
+    assert main([group]) == 2
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: lburst {group}") and "SUBCOMMAND" in out
+
+
+def test_every_option_of_every_command_has_help_and_shows_its_default():
+    for words, _, _ in COMMANDS:
+        parser = build_parser(words)
+        sub = parser
+        for word in words:
+            sub = next(a for a in sub._actions if a.__class__.__name__ == "_SubParsersAction").choices[word]
+        lacking = [a.dest for a in sub._actions if not a.help]
+        assert not lacking, (words, lacking)
+        text = sub.format_help()
+        assert "(default: None)" not in text and "(default: False)" not in text
+    assert "(default: 4000)" in build_parser(("extract",))._subparsers._group_actions[0].choices["extract"].format_help()
+
+
+def test_simulate_flight_takes_out_as_an_option(tmp_path):
+    assert main(["simulate", "flight", "--out", str(tmp_path / "scene"), "--bursts", "2", "--frames", "1",
+                 "--size", "64x48", "--supersample", "1"]) == 0
+    assert (tmp_path / "scene" / "reference.json").is_file()
+
+
+def test_os_errors_are_one_line_naming_the_path(tmp_path):
+    burst = tmp_path / "b0"
+    save_burst(np.zeros((1, 32, 32, 3), np.uint8), burst)
+    (tmp_path / "file").write_text("x")
+    for out in (tmp_path / "file", tmp_path / "file" / "under"):
+        proc = _cli("extract", burst, "--out", out, "--method", "sift")
+        assert proc.returncode != 0 and "Traceback" not in proc.stderr
+        assert f"{tmp_path / 'file'}" in proc.stderr.strip().splitlines()[-1], proc.stderr
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "last.pt").write_bytes(b"")
+    proc = _cli("train", "--data", tmp_path, "--out", run, "--resume")
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert f"{run / 'last.pt'}: not a readable training state" in proc.stderr
+
+
+def test_a_bad_option_value_is_one_line(tmp_path):
+    burst = tmp_path / "b0"
+    save_burst(np.zeros((1, 32, 32, 3), np.uint8), burst)
+    proc = _cli("extract", burst, "--out", tmp_path / "out", "--top-k", "-1")
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr and "top_k" in proc.stderr
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="CUDA is here")
+def test_device_cuda_without_cuda_is_one_clear_line(tmp_path):
+    burst = tmp_path / "b0"
+    save_burst(np.zeros((5, 32, 32, 3), np.uint8), burst)
+    proc = _cli("extract", burst, "--out", tmp_path / "out", "--device", "cuda")
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert "CUDA is not available" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+
+
+def test_bf16_on_a_cpu_without_native_bf16_warns(monkeypatch):
+    monkeypatch.setattr(model_module, "_cpu_flags", lambda: {"sse2", "avx2"})
+    with pytest.warns(RuntimeWarning, match="without native bf16"):
+        model_module.check_precision("bf16", "cpu")
+    monkeypatch.setattr(model_module, "_cpu_flags", lambda: {"avx2", "amx_bf16"})
+    model_module.check_precision("bf16", "cpu")  # no warning: checked by -W error in pytest's filter below
+    model_module.check_precision("fp32", "cpu")
+
+
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
+
+def test_a_full_disk_names_the_file_being_written(tmp_path, monkeypatch):
+    def full(src, dst):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", full)
+    with pytest.raises(OSError, match="No space left") as err:
+        with atomic_path(tmp_path / "features.npz") as tmp:
+            tmp.write_bytes(b"x")
+    assert err.value.filename == str(tmp_path / "features.npz")
+    assert [p.name for p in tmp_path.iterdir()] == []
+
+
+def test_temporaries_of_a_killed_writer_are_removed_by_the_next_write(tmp_path):
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f".a.npz.{dead.pid}.x1y2.tmp.npz"
+    live = tmp_path / f".a.npz.{os.getppid()}.z3.tmp.npz"  # a live process's write in progress
+    stale.write_bytes(b"partial")
+    live.write_bytes(b"partial")
+    with atomic_path(tmp_path / "a.npz") as tmp:
+        tmp.write_bytes(b"whole")
+    assert not stale.exists() and live.exists() and (tmp_path / "a.npz").read_bytes() == b"whole"
+    assert remove_stale_temporaries(tmp_path / "a.npz") == []
