@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import re
 import warnings
-from dataclasses import replace, dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np

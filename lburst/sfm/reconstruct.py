@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from lburst.features import Features, check_features
 from lburst import store
+from lburst.features import Features, check_features
 from lburst.io import atomic_path, file_sha1, read_features_npz, write_image
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, exif_source, list_scene, load_item, reference_cameras
