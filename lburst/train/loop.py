@@ -26,14 +26,31 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from lburst.io import atomic_path
+from lburst.model import (
+    AUTOCAST_DTYPES,
+    IMAGENET_MEAN,
+    IMAGENET_STD,
+    CheckpointError,
+    LBurstNet,
+    NetConfig,
+    autocast_dtype,
+    check_device,
+    check_precision,
+    load_checkpoint,
+    replicate_frames,
+    save_checkpoint,
+)
 from lburst.paths import shared_dir
-from lburst.model import (AUTOCAST_DTYPES, IMAGENET_MEAN, IMAGENET_STD, CheckpointError, LBurstNet, NetConfig,
-                          autocast_dtype, check_device, check_precision, load_checkpoint,
-                          replicate_frames, save_checkpoint)
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
-from lburst.train.losses import (APSampling, cosim_loss, distillation_loss, logit_margin_loss, peaky_loss,
-                                 reliability_ap_loss)
+from lburst.train.losses import (
+    APSampling,
+    cosim_loss,
+    distillation_loss,
+    logit_margin_loss,
+    peaky_loss,
+    reliability_ap_loss,
+)
 from lburst.train.pairs import PairConfig
 
 LOG_FIELDS = ("step", "seconds", "loss", "cosim", "peaky", "reliability", "ap", "distill")
