@@ -11,7 +11,7 @@ def clean_flight(tmp_path_factory):
     from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
 
     out = tmp_path_factory.mktemp("clean_flight")
-    cfg = NightFlightConfig(n_bursts=6, frames_per_burst=5, width=320, height=240, noise="none")
+    cfg = NightFlightConfig(n_bursts=10, frames_per_burst=5, width=320, height=240, noise="none")
     make_night_flight(out, cfg, progress=False)
     return out
 
@@ -19,6 +19,7 @@ def clean_flight(tmp_path_factory):
 @pytest.mark.parametrize("method", ["sift", "lburst"])
 def test_every_image_registers_at_zero_noise(clean_flight, tmp_path, method):
     result = reconstruct_scene(clean_flight, method, tmp_path / method, progress=False, camera="reference",
-                               fix_intrinsics=True, pairs="sequential", overlap=4)
+                               fix_intrinsics=True, pairs="sequential", overlap=4,
+                               num_threads=1)  # one thread: the same result on a busy or an idle machine
     assert result.error is None and result.registered == result.names
     assert result.metrics["ate_percent"] < 1.0
