@@ -148,9 +148,10 @@ class LBurst:
     ) -> None:
         """``net``: the network; or ``runner`` (with ``frames``): any callable with the
         signature of :meth:`lburst.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session.
-        ``align``: warp the frames onto the common frame with their estimated shifts
-        before the network (:func:`lburst.methods.merge.align_burst`), for weights trained
-        on aligned bursts (their checkpoint says ``meta['input'] == 'aligned'``)."""
+        ``align``: the weights were trained on aligned bursts (their checkpoint says
+        ``meta['input'] == 'aligned'``): the ``lburst`` method (:mod:`lburst.methods.learned`)
+        then warps a burst's frames onto the common frame before :meth:`extract`, as
+        ``align+lburst`` does."""
         if net is None and runner is None:
             raise ValueError("give a network or a runner")
         self.device = check_device(device)
@@ -218,15 +219,6 @@ class LBurst:
                 burst = burst[n // 2 : n // 2 + 1]  # single-image net: the common frame
             else:
                 raise ValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
-        if self.align:
-            from lburst.methods.merge import align_burst
-            from lburst.model import check_float_burst
-
-            if np.issubdtype(burst.dtype, np.floating):  # aligned on a 16-bit copy
-                check_float_burst(burst)
-                burst = align_burst(np.round(burst * 65535).astype(np.uint16)).astype(np.float32) / 65535
-            else:
-                burst = align_burst(burst)
         return normalize_burst(burst[self._perm], self.device)
 
     @torch.inference_mode()
