@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from lburst.io import atomic_path, read_image
+from lburst.io import atomic_path, read_image, write_image
 
 CROP = 0.8
 
@@ -70,14 +70,6 @@ def illumination_change(image: np.ndarray, rng: np.random.Generator) -> np.ndarr
     return np.clip(np.round(x * 255), 0, 255).astype(np.uint8)
 
 
-def _write_png(path: Path, image: np.ndarray) -> None:
-    ok, data = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-    if not ok:
-        raise OSError(f"{path}: could not encode the image")
-    with atomic_path(path) as tmp:
-        data.tofile(tmp)
-
-
 def make_sequence(photo: np.ndarray, kind: str, rng: np.random.Generator) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Six images and the five homographies H1toK of one sequence of ``kind``."""
     ph, pw = photo.shape[:2]
@@ -115,7 +107,7 @@ def make_validation_sequences(photos: list[Path], out: str | Path, seed: int = 0
         images, homographies = make_sequence(read_image(path), kind, rng)
         folder.mkdir(exist_ok=True)
         for k, img in enumerate(images, 1):
-            _write_png(folder / f"img{k}.png", img)
+            write_image(folder / f"img{k}.png", img)
         for k, hk in enumerate(homographies, 2):  # written last: a sequence with H1to6p is complete
             with atomic_path(folder / f"H1to{k}p") as tmp:
                 np.savetxt(tmp, hk, fmt="%.10g")
