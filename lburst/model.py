@@ -79,6 +79,21 @@ def check_precision(precision: str, device: torch.device | str) -> None:
                       "runs about 3x slower than fp32", RuntimeWarning, stacklevel=2)
 
 
+def training_memory_format(device: torch.device | str, name: str = "auto") -> torch.memory_format:
+    """The memory format for training the network: ``channels_last``, ``contiguous``, or
+    ``auto``: channels-last on CUDA and on CPUs with AVX-512, contiguous on CPUs without
+    it (on a 2-core AVX2 AMD EPYC, one thread, a 5-frame batch of 8 x 192 px: forward +
+    backward 17.4 s channels-last, 13.6 s contiguous; ``benchmarks/train_speed.py``)."""
+    formats = {"channels_last": torch.channels_last, "contiguous": torch.contiguous_format}
+    if name == "auto":
+        flags = _cpu_flags()
+        cpu_without_avx512 = torch.device(device).type == "cpu" and flags is not None and "avx512f" not in flags
+        name = "contiguous" if cpu_without_avx512 else "channels_last"
+    if name not in formats:
+        raise ValueError(f"memory format must be auto, channels_last or contiguous, got {name!r}")
+    return formats[name]
+
+
 def check_device(device: torch.device | str) -> torch.device:
     """``device`` as a torch device; ``ValueError`` in one line for a bad name or CUDA that is not there."""
     try:

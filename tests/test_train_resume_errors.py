@@ -3,12 +3,15 @@ not there, a run of no steps, an unreadable ``last.pt`` (named), and options a r
 
 import argparse
 import json
+import warnings
+from dataclasses import replace
 
 import cv2
 import pytest
 import skimage.data
+import torch
 
-from lburst.model import CheckpointError
+from lburst.model import CheckpointError, training_memory_format
 from lburst.train.loop import TrainConfig, check_resume_options, configure_parser, given_options, train
 from lburst.train.pairs import PairConfig
 
@@ -52,3 +55,36 @@ def test_options_a_resumed_run_would_ignore_are_refused(tmp_path):
         check_resume_options(tmp_path, given_options(args))
     same = parser.parse_args(["--out", str(tmp_path), "--resume", "--frames", "5", "--steps", "200"])
     check_resume_options(tmp_path, given_options(same))  # more steps, same frames: fine
+
+
+def test_a_resumed_run_takes_the_precision_of_the_machine_it_continues_on(photos, tmp_path):
+    with warnings.catch_warnings():  # bf16 on a CPU without native bf16 warns; it still runs
+        warnings.simplefilter("ignore", RuntimeWarning)
+        train([photos], tmp_path, CFG, progress=False, precision="bf16")
+    assert json.loads((tmp_path / "config.json").read_text())["precision"] == "bf16"
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    args = parser.parse_args(["--out", str(tmp_path), "--resume", "--precision", "fp32", "--steps", "2"])
+    check_resume_options(tmp_path, given_options(args))  # not refused: precision is the machine's
+    train([photos], tmp_path, replace(CFG, steps=2), resume=True, progress=False, precision="fp32")
+    assert json.loads((tmp_path / "config.json").read_text())["precision"] == "fp32"
+    train([photos], tmp_path, replace(CFG, steps=3), resume=True, progress=False)  # not given: the run's own
+    assert json.loads((tmp_path / "config.json").read_text())["precision"] == "fp32"
+
+
+@pytest.mark.parametrize("name, expected", [("channels_last", torch.channels_last),
+                                            ("contiguous", torch.contiguous_format)])
+def test_training_memory_format_by_name(name, expected):
+    assert training_memory_format("cpu", name) is expected
+
+
+def test_training_memory_format_auto_follows_the_device_and_cpu(monkeypatch):
+    import lburst.model as model
+
+    assert training_memory_format("cuda", "auto") is torch.channels_last
+    monkeypatch.setattr(model, "_cpu_flags", lambda: {"avx2", "fma"})
+    assert training_memory_format("cpu", "auto") is torch.contiguous_format
+    monkeypatch.setattr(model, "_cpu_flags", lambda: {"avx2", "avx512f"})
+    assert training_memory_format("cpu", "auto") is torch.channels_last
+    with pytest.raises(ValueError, match="memory format must be"):
+        training_memory_format("cpu", "nchw")

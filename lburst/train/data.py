@@ -10,6 +10,7 @@ on: :func:`list_photos` leaves it out unless asked for it.
 
 from __future__ import annotations
 
+import signal
 import zlib
 from pathlib import Path
 from typing import Literal
@@ -89,9 +90,15 @@ class PairDataset(Dataset):
 
 
 def init_worker(_: int) -> None:
-    """Loader workers use one thread each: the parallelism is across workers."""
+    """Loader workers use one thread each: the parallelism is across workers.  They ignore
+    SIGINT and SIGTERM, so a signal sent to the whole process group (Ctrl-C, ``pkill``,
+    a service manager) reaches the training process, which saves and stops, instead of
+    killing a worker and with it every step since the last checkpoint; the DataLoader ends
+    its workers when the training process exits."""
     cv2.setNumThreads(1)
     torch.set_num_threads(1)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 class StreamSampler(Sampler[int]):

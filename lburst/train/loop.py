@@ -39,6 +39,7 @@ from lburst.model import (
     load_checkpoint,
     replicate_frames,
     save_checkpoint,
+    training_memory_format,
 )
 from lburst.paths import shared_dir
 from lburst.train import distributed
@@ -163,6 +164,7 @@ def training_step(
     net: torch.nn.Module, batch: dict[str, torch.Tensor], patch: int, generator: torch.Generator | None = None,
     ap_weight: float = 0.0, precision: str = "fp32", rel_logit_weight: float = 0.0, rel_logit_margin: float = 4.0,
     distill_weight: float = 0.0, teacher: torch.nn.Module | None = None,
+    memory_format: torch.memory_format = torch.channels_last,
 ) -> dict[str, torch.Tensor]:
     """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``).
 
@@ -171,7 +173,7 @@ def training_step(
     dtype = autocast_dtype(precision)
     n = batch["burst_a"].shape[0]
     x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
-    x = x.contiguous(memory_format=torch.channels_last)
+    x = x.contiguous(memory_format=memory_format)
     with torch.autocast(device_type=x.device.type, dtype=dtype, enabled=dtype is not None):
         out = net(x, reliability_logits=rel_logit_weight > 0)
     desc, rep, rel = (out[k].float() for k in ("descriptors", "repeatability", "reliability"))
@@ -186,7 +188,7 @@ def training_step(
     if distill_weight > 0:
         if teacher is None or "clean_a" not in batch:
             raise ValueError("distill_weight > 0 needs a teacher and the batch's clean_a")
-        clean = _normalise(batch["clean_a"]).contiguous(memory_format=torch.channels_last)
+        clean = _normalise(batch["clean_a"]).contiguous(memory_format=memory_format)
         was_training = teacher.training
         teacher.eval()
         with torch.no_grad(), torch.autocast(device_type=x.device.type, dtype=dtype, enabled=dtype is not None):
@@ -248,15 +250,18 @@ def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds:
 
 
 def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, resume: bool = False,
-          device: str | None = None, progress: bool = True) -> Path:
+          device: str | None = None, progress: bool = True, precision: str | None = None,
+          memory_format: str = "auto") -> Path:
     """Train (or resume) a run in folder ``out``; returns the path of ``last.pt``.
+    ``precision`` (if given) replaces the run's own, also on resume: native bf16 is a
+    property of the machine the run continues on, not of the recipe; so is
+    ``memory_format`` (:func:`lburst.model.training_memory_format`).
 
     Started by ``torchrun`` with several processes, it trains data-parallel
     (:mod:`lburst.train.distributed`): each rank draws its own share of the stream and
     rank 0 writes the files."""
     out = Path(out)
     ctx = distributed.setup(None if device is None else str(check_device(device)))
-    check_precision(cfg.precision, ctx.device)
     device = ctx.device
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
@@ -274,6 +279,9 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
                       snapshot_every=cfg.snapshot_every or saved.snapshot_every, tensorboard=cfg.tensorboard)
     elif last.is_file():
         raise FileExistsError(f"{last} exists: pass --resume to continue it, or choose another --out")
+    if precision is not None:  # a property of the machine, not of the recipe: a resumed run may change it
+        cfg = replace(cfg, precision=precision)
+    check_precision(cfg.precision, device)
     photos = list_photos([Path(p) for p in photo_folders])
     total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / (cfg.batch_size * ctx.world))
     if total < 1:
@@ -287,7 +295,8 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
         if init_net.config.frames != cfg.frames:
             raise ValueError(f"{cfg.init}: a {init_net.config.frames}-frame network, but the run has {cfg.frames} frames")
         net.load_state_dict(init_net.state_dict())
-    net = net.to(device).to(memory_format=torch.channels_last)
+    layout = training_memory_format(device, memory_format)
+    net = net.to(device).to(memory_format=layout)
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     if state is not None:
         net.load_state_dict(state["state_dict"])
@@ -316,9 +325,9 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     started = time.monotonic()
     last_save = started
 
-    def checkpoint() -> None:  # rank 0: the resumable state and the log, atomically
+    def checkpoint() -> None:  # rank 0: the log, then the resumable state, atomically
+        _write_log(out / "log.csv", log)  # first: a resume reads the log only up to the state's step
         save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
-        _write_log(out / "log.csv", log)
     bar = tqdm(total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main),
                dynamic_ncols=True)
     data = iter(loader)
@@ -331,7 +340,7 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             losses = training_step(model, batch, cfg.patch, generator, ap_weight=cfg.ap_weight,
                                    precision=cfg.precision, rel_logit_weight=cfg.rel_logit_weight,
                                    rel_logit_margin=cfg.rel_logit_margin, distill_weight=cfg.distill_weight,
-                                   teacher=net)
+                                   teacher=net, memory_format=layout)
             optimizer.zero_grad(set_to_none=True)
             losses["loss"].backward()
             optimizer.step()
@@ -412,6 +421,8 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tensorboard", action="store_true", help="also log the losses for TensorBoard (RUN/tensorboard)")
     p.add_argument("--snapshot-every", type=int, help="keep the weights every this many steps (snapshots/)")
     p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
+    p.add_argument("--memory-format", choices=("auto", "channels_last", "contiguous"), default="auto",
+                   help="tensor layout: auto is channels_last on CUDA and AVX-512 CPUs, contiguous on other CPUs")
     p.add_argument("--rel-logit-weight", type=float,
                    help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)")
     p.add_argument("--distill-weight", type=float,
@@ -437,7 +448,7 @@ def load_state(path: Path) -> dict:
 
 #: Settings that a resumed run takes from the command line; the others stay the run's own.
 RESUME_OVERRIDES = ("steps", "epochs", "time_budget_s", "workers", "threads", "checkpoint_every_s",
-                    "snapshot_every", "tensorboard")
+                    "snapshot_every", "tensorboard", "precision")
 
 
 def check_resume_options(out: str | Path, given: dict) -> None:
@@ -483,6 +494,7 @@ def main(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     if args.resume:
         check_resume_options(args.out, given_options(args))
-    last = train(data, args.out, cfg, resume=args.resume, device=args.device)
+    last = train(data, args.out, cfg, resume=args.resume, device=args.device, precision=args.precision,
+                 memory_format=args.memory_format)
     print(f"checkpoint: {last}")
     return 0
