@@ -29,11 +29,8 @@ from lburst.features import Features, check_features
 from lburst.io import read_features_npz, write_features_npz
 
 
-def content_sha1(path: str | Path) -> str:
-    """SHA-1 over a burst's bytes: a file's, or a folder's non-hidden files (names and bytes, sorted)."""
-    path = Path(path)
-    files = [path] if not path.is_dir() else sorted(
-        (p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")), key=lambda p: p.name)
+def files_sha1(files: list[Path] | tuple[Path, ...]) -> str:
+    """SHA-1 over ``files`` in the given order: each file's name and every byte, read in 1 MiB blocks."""
     digest = hashlib.sha1()
     for file in files:
         digest.update(os.fsencode(file.name) + b"\0")
@@ -42,6 +39,14 @@ def content_sha1(path: str | Path) -> str:
                 digest.update(block)
         digest.update(b"\0")
     return digest.hexdigest()
+
+
+def content_sha1(path: str | Path) -> str:
+    """SHA-1 over a burst's bytes: a file's, or a folder's non-hidden files (names and bytes, sorted)."""
+    path = Path(path)
+    files = [path] if not path.is_dir() else sorted(
+        (p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")), key=lambda p: p.name)
+    return files_sha1(files)
 
 
 def method_key(spec: str, **options: Any) -> dict[str, Any]:

@@ -57,3 +57,71 @@ def test_raw_gain_matters_on_dark_dng(recordings):
         burst=3, normalisation=Normalisation(gain="none"))).bursts())[1]
     assert linear.dtype == np.uint16 and linear.mean() / 65535 < 0.05  # a dark RAW frame
     assert auto.dtype == np.uint8 and 40 < auto.mean() < 200
+
+
+def _raw_video(path, frames=100, size=(96, 128)):
+    """An uncompressed AVI (rawvideo, > 2 MiB) of a textured image panning right, so that
+    bytes changed in its middle change the pixels of middle frames only."""
+    import av
+    import skimage.data
+
+    texture = skimage.data.astronaut()[::2, ::2]
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("rawvideo", rate=20)
+        stream.width, stream.height, stream.pix_fmt = size[1], size[0], "bgr24"
+        for k in range(frames):
+            image = np.ascontiguousarray(texture[50:50 + size[0], k:k + size[1]])
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(image, format="rgb24")))
+        container.mux(stream.encode())
+
+
+def test_a_video_changed_in_its_middle_is_extracted_again(tmp_path):
+    video = tmp_path / "v.avi"
+    _raw_video(video)
+    size = video.stat().st_size
+    assert size > 3 << 20  # the middle lies outside the first and last MiB
+    args = ["--every", "10", "--method", "orb", "--out"]
+    assert main(["extract", str(video), *args, str(tmp_path / "out")]) == 0
+    names = sorted(p.name for p in (tmp_path / "out" / "v").glob("*.npz"))
+    before = {name: read_features_npz(tmp_path / "out" / "v" / name) for name in names}
+    data = bytearray(video.read_bytes())
+    frame = data.index(b"00dc", size // 2) + 8  # the pixels of the frame after the middle byte (an AVI chunk)
+    data[frame:frame + 30000] = bytes(255 - b for b in data[frame:frame + 30000])
+    video.write_bytes(bytes(data))  # same size, same first and last MiB
+    assert main(["extract", str(video), *args, str(tmp_path / "out")]) == 0
+    assert main(["extract", str(video), *args, str(tmp_path / "fresh")]) == 0
+    assert sorted(p.name for p in (tmp_path / "fresh" / "v").glob("*.npz")) == names and len(names) == 10
+    changed = []
+    for name in names:
+        rerun, fresh = (read_features_npz(tmp_path / d / "v" / name) for d in ("out", "fresh"))
+        assert rerun.keys() == fresh.keys()
+        for key in fresh:
+            np.testing.assert_array_equal(rerun[key], fresh[key], err_msg=f"{name}: {key}")
+        if any(not np.array_equal(fresh[key], before[name][key]) for key in fresh):
+            changed.append(name)
+    assert changed and len(changed) < len(names)  # the middle keyframes changed, the others did not
+
+
+def test_a_frame_folder_with_a_frame_rewritten_at_the_same_size_is_extracted_again(tmp_path):
+    import cv2
+    import skimage.data
+
+    folder = tmp_path / "rec"
+    folder.mkdir()
+    (folder / "meta.json").write_text(json.dumps({"fps": 20}))
+    texture = skimage.data.astronaut()[::2, ::2]
+    for k in range(9):
+        cv2.imwrite(str(folder / f"frame_{k:03d}.ppm"), texture[50:146, 3 * k:3 * k + 128, ::-1])
+    args = ["--every", "4", "--burst", "3", "--method", "orb", "--out"]
+    assert main(["extract", str(folder), *args, str(tmp_path / "out")]) == 0
+    before = read_features_npz(tmp_path / "out" / "rec" / "f000004_t0.200s.npz")
+    frame = folder / "frame_004.ppm"
+    size = frame.stat().st_size
+    cv2.imwrite(str(frame), np.ascontiguousarray(texture[50:146, 12:140][::-1, ::-1, ::-1]))  # upside down
+    assert frame.stat().st_size == size
+    assert main(["extract", str(folder), *args, str(tmp_path / "out")]) == 0
+    after = read_features_npz(tmp_path / "out" / "rec" / "f000004_t0.200s.npz")
+    assert not np.array_equal(before["keypoints"], after["keypoints"])
+    assert main(["extract", str(folder), *args, str(tmp_path / "fresh")]) == 0
+    fresh = read_features_npz(tmp_path / "fresh" / "rec" / "f000004_t0.200s.npz")
+    np.testing.assert_array_equal(after["keypoints"], fresh["keypoints"])

@@ -13,7 +13,6 @@ and the camera of ``meta.json``, so the usual metrics apply.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 from typing import Iterator
@@ -25,26 +24,24 @@ from lburst.sfm.poses import path_length
 from lburst.sfm.reference import Reference
 from lburst.sfm.scene import Scene, SceneItem
 from lburst.sources import Keyframe, Recording
+from lburst.store import files_sha1
 from lburst.tum import lookup, read_tum
 
 KEYFRAMES_FILE = "keyframes.json"
 
 
 def fingerprint(recording: Recording) -> str:
-    """SHA-1 over what identifies the recording's content: for a video its size and its
-    first and last MiB, for a folder every frame file's name and size."""
-    digest = hashlib.sha1()
-    if recording.is_video:
-        size = recording.path.stat().st_size
-        digest.update(str(size).encode())
-        with open(recording.path, "rb") as f:
-            digest.update(f.read(1 << 20))
-            f.seek(max(size - (1 << 20), 0))
-            digest.update(f.read(1 << 20))
-    else:
-        for p in recording.files:
-            digest.update(f"{p.name}:{p.stat().st_size};".encode())
-    return digest.hexdigest()
+    """SHA-1 over the recording's whole content: a video's bytes, or every frame file's name
+    and bytes (:func:`lburst.store.files_sha1`).
+
+    Every byte counts, so a change anywhere (frames re-encoded in the middle of a video, a
+    frame file rewritten at the same size) computes the keyframes again.  Sampling the
+    file (its size and first and last MiB) missed such changes and served stale features;
+    trusting ``(size, mtime_ns)`` misses them too where a copy keeps the times (``cp -p``,
+    ``rsync -a``, ``tar``) or a clock goes back.  Reading costs about a second per GB from a
+    warm disk, once per run, far less than decoding the recording.
+    """
+    return files_sha1([recording.path] if recording.is_video else recording.files)
 
 
 def cache_key(recording: Recording) -> str:
