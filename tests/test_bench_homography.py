@@ -113,3 +113,15 @@ def test_weights_retrained_at_the_same_path_are_not_served_cached_results(tmp_pa
     torch.save(state, ckpt)  # "retrained" in place
     assert run() != first
     assert len(list((tmp_path / "out" / "cache").iterdir())) == 2
+
+
+def test_a_sequence_image_replaced_under_the_same_name_is_run_again(tmp_path):
+    _write_sequence(tmp_path / "data" / "seq", size=(96, 128))
+    run = lambda out: run_homography_benchmark(tmp_path / "data", ["sift"], [25], tmp_path / out,  # noqa: E731
+                                               progress=False)["methods"]["sift"]["sigma25"]["pairs"]["seq"]
+    first = run("out")
+    image = tmp_path / "data" / "seq" / "img3.png"
+    cv2.imwrite(str(image), cv2.flip(cv2.imread(str(image)), -1))  # another picture, the same name
+    again, fresh = run("out"), run("fresh")
+    assert again == fresh
+    assert again[1] != first[1] and again[0] == first[0]  # pair (1, 3) changed, pair (1, 2) did not

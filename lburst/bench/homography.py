@@ -21,15 +21,17 @@ Protocol (reproducible by anyone):
    (1, K), K = 2..6; averaged over the 5 pairs of a sequence, then over sequences.
    A second table keeps only pairs rotated by 25 degrees or less (pooled).
 
-Features are cached per (method, noise level, sequence, image) under ``OUT/cache``; a
-learned method's cache is keyed on its weights' SHA-1 too, so retrained weights at the
-same path are run again.
+Features are kept in the features store (:mod:`lburst.store`), one file per (method,
+noise level, sequence, image) under ``OUT/cache``, keyed as ``lburst extract`` keys them:
+the method spec with its weights' SHA-1 and options, and the source (the sequence folder
+and image number) with the SHA-1 of the burst's content (:func:`burst_sha1`).  So
+retrained weights at the same path, or a sequence image replaced under the same name, are
+run again; each file also keeps the seconds its extraction took.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 import hashlib
 import json
 import re
@@ -42,6 +44,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from lburst import store
 from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, rotation_deg
 from lburst.bench.sequences import Sequence, list_sequences, read_sequence
 from lburst.features import Features
@@ -112,7 +115,6 @@ class MethodRunner:
 
     def __init__(self, spec: str, top_k: int) -> None:
         from lburst.methods import accepts, create
-        from lburst.methods.learned import results_key
 
         self.spec = spec
         if spec.startswith("gold:"):
@@ -121,8 +123,11 @@ class MethodRunner:
             self.mode, prefix, inner = "oracle", "oracle-merge+", spec[len("oracle-merge+"):]
         else:
             self.mode, prefix, inner = "burst", "", spec
-        self.extractor = create(inner, **({"top_k": top_k} if accepts(inner, "top_k") else {}))
-        self.key = prefix + results_key(inner)  # names the feature cache
+        options = {"top_k": top_k} if accepts(inner, "top_k") else {}
+        self.extractor = create(inner, **options)
+        method = store.method_key(inner, **options)  # the weights' SHA-1 and the options
+        self.method = {**method, "spec": prefix + method["spec"]}
+        self.key = self.method["spec"]  # names the feature cache's folder
 
     def __call__(self, image: np.ndarray, burst: np.ndarray, motion: BurstMotion) -> Features:
         if self.mode == "gold":
@@ -144,17 +149,33 @@ def _slug(spec: str) -> str:
     return f"{readable}-{hashlib.sha1(spec.encode()).hexdigest()[:8]}"
 
 
-def _cached(path: Path, compute) -> tuple[Features, float]:
-    if path.is_file():
-        with np.load(path) as data:
-            feats = {k: data[k] for k in data.files}
-        return feats, float(feats.pop("seconds"))
-    start = time.perf_counter()
-    feats = compute()
-    seconds = time.perf_counter() - start
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        np.savez(f, seconds=seconds, **{k: feats[k] for k in ("keypoints", "scales", "scores", "descriptors")})
-    return feats, seconds
+def burst_sha1(image: np.ndarray, burst: np.ndarray, motion: BurstMotion) -> str:
+    """SHA-1 of what a method sees of one protocol burst: the clean image (``gold:``), the
+    noisy burst and its true motion (``oracle-merge+``), with their shapes and dtypes."""
+    digest = hashlib.sha1()
+    for array in (image, burst):
+        digest.update(f"{array.shape}{array.dtype};".encode())
+        digest.update(np.ascontiguousarray(array).tobytes())
+    digest.update(repr(motion).encode())
+    return digest.hexdigest()
+
+
+def stored_features(runner: MethodRunner, path: Path, source: Path, image: np.ndarray, burst: np.ndarray,
+                    motion: BurstMotion) -> tuple[Features, float]:
+    """The runner's features of one burst and the seconds they took: from the store at ``path``
+    when it holds them under the same key, else computed and stored.  Either way they are
+    returned as stored, so a rerun gives the same numbers."""
+    key = store.burst_key(runner.method, source, burst_sha1(image, burst, motion))
+    found = store.load(path, key)
+    if found is None:
+        start = time.perf_counter()
+        feats = runner(image, burst, motion)
+        seconds = time.perf_counter() - start
+        store.save(path, feats, (image.shape[1], image.shape[0]), key, seconds=seconds)
+        found = store.load(path, key)
+        if found is None:
+            raise OSError(f"{path}: features just written cannot be read back")
+    return found[0], float(found[2]["seconds"])
 
 
 def pair_metrics(seq: Sequence, feats: list[Features], k: int, matcher=None) -> dict:
@@ -214,6 +235,7 @@ def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[
                      "methods": {}}
     bar = tqdm(total=len(levels) * len(folders) * len(methods) * 6, desc="homography bench", disable=not progress)
     sequences = {f.name: read_sequence(f, max_side) for f in folders}
+    paths = {f.name: f for f in folders}
     kinds = {name: seq.kind for name, seq in sequences.items()}
     for spec, runner in runners.items():
         results["methods"][spec] = {}
@@ -224,7 +246,7 @@ def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[
                 for i, image in enumerate(seq.images):
                     burst, motion = protocol_burst(image, name, i, level)
                     cache = out / "cache" / _slug(runner.key) / level.label / name / f"{i + 1}.npz"
-                    f, t = _cached(cache, functools.partial(runner, image, burst, motion))
+                    f, t = stored_features(runner, cache, paths[name] / str(i + 1), image, burst, motion)
                     feats.append(f)
                     times.append(t)
                     bar.update(1)
