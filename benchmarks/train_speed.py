@@ -20,10 +20,11 @@ import numpy as np
 import torch
 
 
-def measure(frames: int, batch: int, crop: int, steps: int, device: str, precision: str = "fp32") -> dict:
+def measure(frames: int, batch: int, crop: int, steps: int, device: str, precision: str = "fp32",
+            memory_format: str = "channels_last") -> dict:
     import skimage.data
 
-    from lburst.model import LBurstNet, NetConfig
+    from lburst.model import LBurstNet, NetConfig, training_memory_format
     from lburst.train.loop import training_step
     from lburst.train.pairs import PairConfig, training_pair
 
@@ -40,14 +41,15 @@ def measure(frames: int, batch: int, crop: int, steps: int, device: str, precisi
         "mask": torch.stack([torch.from_numpy(p.mask) for p in pairs]).to(device),
     }
     torch.manual_seed(0)
-    net = LBurstNet(NetConfig(frames=frames)).to(device).to(memory_format=torch.channels_last).train()
+    layout = training_memory_format(device, memory_format)
+    net = LBurstNet(NetConfig(frames=frames)).to(device).to(memory_format=layout).train()
     opt = torch.optim.Adam(net.parameters(), lr=1e-4, weight_decay=5e-4)
     times = []
     for i in range(steps + 1):
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         t = time.perf_counter()
-        losses = training_step(net, batch_t, 16, precision=precision)
+        losses = training_step(net, batch_t, 16, precision=precision, memory_format=layout)
         opt.zero_grad(set_to_none=True)
         losses["loss"].backward()
         opt.step()
@@ -56,7 +58,8 @@ def measure(frames: int, batch: int, crop: int, steps: int, device: str, precisi
         if i:
             times.append(time.perf_counter() - t)
     step_s = statistics.median(times)
-    return {"frames": frames, "batch": batch, "crop": crop, "device": device, "precision": precision, "step_s": step_s,
+    return {"frames": frames, "batch": batch, "crop": crop, "device": device, "precision": precision,
+            "memory_format": memory_format, "step_s": step_s,
             "steps_per_s": 1 / step_s, "pairs_per_s": batch / step_s, "pair_s": pair_s}
 
 
@@ -70,16 +73,19 @@ def main() -> int:
 
     p.add_argument("--precision", nargs="+", default=["fp32"], choices=list(AUTOCAST_DTYPES),
                    help="autocast of the forward pass (each is measured)")
+    p.add_argument("--memory-format", nargs="+", default=["channels_last", "contiguous"],
+                   choices=("channels_last", "contiguous"), help="tensor layouts (each is measured)")
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--out", type=Path)
     args = p.parse_args()
-    rows = [measure(n, args.batch, args.crop, args.steps, args.device, prec) for n in args.frames for prec in args.precision]
+    rows = [measure(n, args.batch, args.crop, args.steps, args.device, prec, layout)
+            for n in args.frames for prec in args.precision for layout in args.memory_format]
     print(f"\ntraining step, batch {args.batch} pairs of {args.crop} px crops, {args.device}, "
           f"{torch.get_num_threads()} threads, median of {args.steps}\n")
-    print("| frames | precision | s / step | steps / s | pairs / s | s / pair generated (1 worker) |")
-    print("|---|---|---|---|---|---|")
+    print("| frames | precision | memory format | s / step | steps / s | pairs / s | s / pair generated (1 worker) |")
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['frames']} | {r['precision']} | {r['step_s']:.2f} | {r['steps_per_s']:.3f} | {r['pairs_per_s']:.2f} | {r['pair_s']:.3f} |")
+        print(f"| {r['frames']} | {r['precision']} | {r['memory_format']} | {r['step_s']:.2f} | {r['steps_per_s']:.3f} | {r['pairs_per_s']:.2f} | {r['pair_s']:.3f} |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(rows, indent=2))
