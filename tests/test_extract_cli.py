@@ -92,6 +92,17 @@ def test_features_h5_holds_every_finished_burst(tmp_path):
         assert sorted(f) == ["b0", "b1"]
 
 
+def test_features_h5_is_written_when_no_burst_finished(tmp_path, capsys):
+    import h5py
+
+    out = tmp_path / "out"
+    assert main(["extract", str(tmp_path / "missing"), "--out", str(out), "--method", "sift", "--h5"]) == 1
+    err = capsys.readouterr().err
+    assert "missing: no such file or folder" in err and "features.h5" not in err
+    with h5py.File(out / "features.h5") as f:
+        assert list(f) == []
+    assert [p.name for p in out.iterdir()] == ["features.h5"]  # no temporary left
+
 def test_extract_dot_names_the_output_after_the_folder(tmp_path, monkeypatch):
     burst = _small_burst(tmp_path / "here")
     monkeypatch.chdir(burst)

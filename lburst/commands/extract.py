@@ -99,8 +99,10 @@ def extract_recording(path: Path, extractor, args: argparse.Namespace, method: d
 
 def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
     """hloc's ``features.h5`` from finished ``.npz`` files (group name, file), atomically."""
+    import h5py
+
     with atomic_path(path) as tmp:
-        tmp.unlink()  # h5py appends to an existing file; start from none
+        h5py.File(tmp, "w").close()  # a new, empty file (h5py appends to an existing one), even when none finished
         for group, npz in finished:
             features = read_features_npz(npz)
             write_features_h5(tmp, group, features, tuple(int(v) for v in features["imsize"]))
