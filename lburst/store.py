@@ -1,14 +1,15 @@
 """The features store: one ``.npz`` per burst that records what made it.
 
-Used by ``lburst extract`` and ``lburst reconstruct`` (and so by the reconstruction
-benchmark).  Each file has the layout of :func:`lburst.io.write_features_npz` plus
+Used by ``lburst extract``, ``lburst reconstruct`` (and so by the reconstruction
+benchmark) and the homography benchmark.  Each file has the layout of :func:`lburst.io.write_features_npz` plus
 ``_meta``, a JSON object whose ``key`` says what the features depend on:
 
 - ``method``: the method spec and the SHA-1 of the weights it loads
   (:func:`lburst.methods.learned.results_key`), so retrained weights are not served
   old features, plus the options given besides the spec (``top_k``, ``precision``);
 - ``source``: the burst's absolute path and the SHA-1 of its content
-  (:func:`content_sha1`), so changed frames are computed again.
+  (:func:`content_sha1`; a recording's keyframe, or a benchmark's generated burst, gives
+  the SHA-1 of what it was made from), so changed frames are computed again.
 
 Stored features are used only when the stored key equals the wanted one
 (:func:`load`).  :func:`same_source` tells a stale file of the same burst (to replace)
@@ -29,11 +30,12 @@ from lburst.features import Features, check_features
 from lburst.io import read_features_npz, write_features_npz
 
 
-def files_sha1(files: list[Path] | tuple[Path, ...]) -> str:
-    """SHA-1 over ``files`` in the given order: each file's name and every byte, read in 1 MiB blocks."""
+def files_sha1(files: list[Path] | tuple[Path, ...], root: Path | None = None) -> str:
+    """SHA-1 over ``files`` in the given order: each file's name (its path under ``root`` when
+    given) and every byte, read in 1 MiB blocks."""
     digest = hashlib.sha1()
     for file in files:
-        digest.update(os.fsencode(file.name) + b"\0")
+        digest.update(os.fsencode(file.relative_to(root) if root is not None else file.name) + b"\0")
         with open(file, "rb") as f:
             for block in iter(lambda: f.read(1 << 20), b""):
                 digest.update(block)

@@ -77,3 +77,23 @@ def test_benchmark_evaluates_again_when_the_reference_is_remade(tmp_path):
     second = run_benchmark([scene], ["sift"], tmp_path / "bench", progress=False)["rows"][0]
     assert second["ate_rmse"] > 0.1 and second["reference_sha1"] != first["reference_sha1"]
     assert ReconstructionResult.load(out / "result.json").metrics["ate_rmse"] == second["ate_rmse"]
+
+
+def test_benchmark_runs_a_scene_again_when_its_bursts_change(tmp_path):
+    import cv2
+    import numpy as np
+
+    scene = tmp_path / "scene"
+    scene.mkdir()
+    for i in range(3):
+        image = np.random.default_rng(i).integers(0, 256, size=(120, 160, 3), dtype=np.uint8)
+        cv2.imwrite(str(scene / f"{i}.png"), cv2.GaussianBlur(image, (0, 0), 1.0))
+    row = lambda out: run_benchmark([scene], ["sift"], tmp_path / out, progress=False,  # noqa: E731
+                                    num_threads=1)["rows"][0]
+    first = row("bench")
+    assert row("bench")["keypoints_per_image"] == first["keypoints_per_image"]  # unchanged: finished
+    cv2.imwrite(str(scene / "1.png"), np.zeros((120, 160, 3), np.uint8))  # the burst replaced by a black frame
+    again, fresh = row("bench"), row("fresh")
+    assert again["keypoints_per_image"] == fresh["keypoints_per_image"] < first["keypoints_per_image"]
+    assert again["registered"] == fresh["registered"]
+    assert row("bench")["keypoints_per_image"] == again["keypoints_per_image"]

@@ -2,7 +2,12 @@
 
 For each (method, scene) :func:`lburst.sfm.reconstruct_scene` runs in
 ``OUT/<method>/<scene>/`` unless that folder already holds a finished ``result.json``
-of the same method (so an interrupted benchmark resumes; ``--force`` reruns); a finished
+of the same run (so an interrupted benchmark resumes; ``--force`` reruns).  The same run
+means the same method (the folder is named after its spec and weights' SHA-1) and the
+key in ``bench_key.json`` (:func:`run_key`): the scene's content and the options.  A
+scene whose bursts changed under the same names is run again; the features of unchanged
+bursts come from the features store (:mod:`lburst.store`).  A ``result.json`` without
+``bench_key.json`` (written before the key was kept) is taken as finished.  A finished
 run is evaluated again against the scene's ``reference.json`` if that appeared or changed
 since (its SHA-1 is kept in the metrics as ``reference_sha1``), so a remade reference needs
 no rerun of the methods.  The table
@@ -23,6 +28,9 @@ from typing import Any
 from lburst.io import atomic_path, file_sha1
 from lburst.methods.learned import results_key
 from lburst.sfm.scene import REFERENCE_FILE
+from lburst.store import files_sha1
+
+KEY_FILE = "bench_key.json"
 
 
 def method_slug(spec: str) -> str:
@@ -44,15 +52,41 @@ def evaluate(result, reference: Path) -> None:
     result.save()
 
 
+def scene_sha1(scene: Path) -> str:
+    """SHA-1 of a scene's content: a recording file's bytes, or every non-hidden file under a
+    scene folder (paths and bytes) except its ``reference.json``, which is evaluated, not run."""
+    if scene.is_file():
+        return files_sha1([scene])
+    files = sorted(p for p in scene.rglob("*") if p.is_file() and p.relative_to(scene) != Path(REFERENCE_FILE)
+                   and not any(part.startswith(".") for part in p.relative_to(scene).parts))
+    return files_sha1(files, root=scene)
+
+
+def run_key(scene: Path, options: dict[str, Any]) -> dict[str, Any]:
+    """What a finished run depends on besides the method: the scene's content and the options."""
+    return {"scene": scene_sha1(scene),
+            "options": {k: str(v) for k, v in sorted(options.items()) if k != "progress"}}
+
+
+def _stored_key(out: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads((out / KEY_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+
+
 def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
     """The table row of one method on one scene (from ``result.json`` when already done)."""
     from lburst.sfm.reconstruct import RESULT_FILE, ReconstructionError, ReconstructionResult, reconstruct_scene
 
     row: dict[str, Any] = {"method": spec, "scene": scene.name, "out": str(out)}
     done = out / RESULT_FILE
+    key = run_key(scene, options) if scene.exists() else None
     if done.is_file() and not force:
         previous = ReconstructionResult.load(done)
-        if previous.method == spec and previous.metrics.get("matcher", "mnn") == options.get("matcher", "mnn"):
+        stored = _stored_key(out) if (out / KEY_FILE).exists() else key
+        if (previous.method == spec and previous.metrics.get("matcher", "mnn") == options.get("matcher", "mnn")
+                and stored == key):
             reference = scene / REFERENCE_FILE
             if (reference.is_file() and not previous.error
                     and previous.metrics.get("reference_sha1") != file_sha1(reference)):
@@ -60,6 +94,8 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
             return {**row, **previous.metrics, "registered": len(previous.registered), "error": previous.error}
     try:
         result = reconstruct_scene(scene, spec, out, **options)
+        with atomic_path(out / KEY_FILE) as tmp:
+            tmp.write_text(json.dumps(key, indent=1))
     except ReconstructionError as err:
         print(f"{spec} on {scene}: {err}", file=sys.stderr)
         return {**row, "converged": 0.0, "error": str(err)}
