@@ -201,6 +201,6 @@ def test_killed_reconstruct_reruns_to_the_uninterrupted_model(tiny_flight, tmp_p
 @pytest.mark.slow
 def test_extract_and_reconstruct_killed_many_times(tmp_path):
     scene = _flight(tmp_path / "scene", bursts=8, size=(256, 192))
-    killed = check_extract(scene, tmp_path / "extract", seed=2, kills=8)
-    killed += check_reconstruct(scene, tmp_path / "reconstruct", seed=3, kills=8)
-    assert killed >= 8  # most kills land before the end of the work
+    killed = check_extract(scene, tmp_path / "extract", seed=2, kills=6)
+    killed += check_reconstruct(scene, tmp_path / "reconstruct", seed=3, kills=6)
+    assert killed >= 6  # most kills land before the end of the work
