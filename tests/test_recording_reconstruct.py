@@ -1,6 +1,8 @@
 """A simulated flight recorded as a video and as DNG frames reconstructs from the recording itself,
 and its TUM trajectory agrees with evo."""
 
+import json
+
 import h5py
 import numpy as np
 import pytest
@@ -44,6 +46,8 @@ def test_video_reconstructs_and_evo_agrees(video, tmp_path):
     assert np.allclose(times, np.arange(0, 97, 16) / 20)
     for name in ("colmap/model/images.bin", "colmap/model.ply", "report.md", "trajectory.png", "registration.png"):
         assert (out / name).stat().st_size > 0
+    timing = json.loads((out / "colmap" / "output.json").read_text())
+    assert timing["verify_seconds"] >= 0 and timing["map_seconds"] > 0  # the COLMAP stages' wall times
     with h5py.File(out / "features.h5") as f, h5py.File(out / "matches.h5") as m:
         first, second = f"{result.names[0]}.png", f"{result.names[1]}.png"
         assert set(f) == {f"{n}.png" for n in result.names}

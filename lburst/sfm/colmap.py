@@ -12,7 +12,8 @@ inputs (failed ``CHECK``s); the parent reads the files the child leaves in ``JOB
 - written by the child: ``database.db``, ``verified.npz`` (``pairs`` (Q, 2) image
   indices, ``inl_<q>`` (M_q, 2) keypoint indices of the inlier matches COLMAP kept),
   ``model/`` (COLMAP binary model), ``model.ply`` and ``output.json``
-  (:func:`summarize`: registered images with world-to-camera ``R``, ``t`` and camera).
+  (:func:`summarize`: registered images with world-to-camera ``R``, ``t`` and camera;
+  ``verify_seconds`` and ``map_seconds``, the wall time of verification and of the mapper).
 
 Note: ``cv2`` is imported before ``pycolmap`` on purpose: importing pycolmap first makes
 later PNG writes by OpenCV (or PIL) in the same process abort with ``free(): invalid
@@ -28,6 +29,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -310,14 +312,19 @@ def run_job(job_dir: str | Path) -> dict:
     matches = [data[f"m_{p}"] for p in range(len(pairs))]
     db_path = job_dir / "database.db"
     image_ids = write_database(db_path, job, keypoints, pairs, matches)
+    start = time.perf_counter()
     verify(db_path, job.options)
+    verified = time.perf_counter()
     v_pairs, inliers = read_inliers(db_path, image_ids)
     with atomic_path(job_dir / "verified.npz") as tmp:
         np.savez(tmp, pairs=v_pairs, **{f"inl_{q}": m for q, m in enumerate(inliers)})
+    mapping = time.perf_counter()
     rec = map_database(db_path, job.image_dir, job_dir / "mapper", job.options) if len(v_pairs) else None
+    mapped = time.perf_counter()
     if rec is not None:
         export_model(rec, job_dir)
     summary = summarize(rec)
+    summary.update(verify_seconds=round(verified - start, 3), map_seconds=round(mapped - mapping, 3))
     with atomic_path(job_dir / "output.json") as tmp:
         tmp.write_text(json.dumps(summary))
     return summary
