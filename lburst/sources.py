@@ -15,7 +15,7 @@ it has (:attr:`Keyframe.filled` counts them); a keyframe whose own frame is miss
 skipped.  Frames are read as a stream and only those of the bursts being assembled are
 held, at most ``N + 1`` at once, so a long recording never sits in memory.
 
-Linear 16-bit frames (DNG, 16-bit PNG/TIFF) are normalised to sRGB uint8 with one gain
+Linear 16-bit frames (DNG, 16-bit PNG/TIFF) are normalised to uint8 with one gain
 for the recording (:mod:`lburst.raw`); 8-bit frames pass unchanged.
 
 Sidecar files (optional), next to a video ``X.mp4`` or inside a folder ``X/``:
@@ -78,8 +78,8 @@ class RecordingOptions:
         """What changes the bursts (for caches): burst, every, start, fps, normalisation."""
         n = self.normalisation
         return (f"burst={self.burst},every={self.every},start={self.start},fps={self.fps},"
-                f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain}"
-                + ("" if n.curve == "srgb" else f",curve={n.curve}"))
+                f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain},"
+                f"curve={n.curve},binning={n.binning}")
 
 
 @dataclass(frozen=True)
@@ -315,10 +315,10 @@ def add_recording_arguments(p) -> None:
     g.add_argument("--start", type=int, default=0, help="frame index of the first keyframe (default 0)")
     g.add_argument("--fps", type=float, help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})")
     g.add_argument("--raw-gain", default="auto",
-                   help="linear 16-bit frames: 'auto' (gain from the 99.5th luminance percentile of the first burst, "
-                        "then sRGB to 8 bit), 'none' (keep linear), or a fixed gain")
-    g.add_argument("--raw-curve", choices=("srgb", "linear"), default="srgb",
-                   help="tone curve after the gain (default srgb)")
+                   help="linear 16-bit frames: 'auto' (the first burst's mean, binned 4x4: its 99.5th luminance "
+                        "percentile to 0.8, then 8 bit), 'none' (keep linear), or a fixed gain")
+    g.add_argument("--raw-curve", choices=("linear", "srgb"), default="linear",
+                   help="tone curve after the gain (default linear, as the networks' training noise)")
 
 
 def recording_options(args) -> RecordingOptions:

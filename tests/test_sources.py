@@ -115,16 +115,35 @@ def test_sixteen_bit_frames_get_one_gain_per_recording(tmp_path):
     folder = _folder(tmp_path, range(9), dtype=np.uint16, scale=100)  # very dark linear frames
     rec = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(percentile=100, target=0.5)))
     bursts = list(rec.bursts())
-    assert rec.gain == pytest.approx(0.5 * 65535 / 100)  # brightest pixel of the first burst -> 0.5 linear
+    # the first burst is frames 0, 0, 1 (linear 0, 0, 100): its mean, 100 / 3, goes to 0.5
+    assert rec.gain == pytest.approx(0.5 * 65535 / (100 / 3))
     assert all(b.dtype == np.uint8 for _, b in bursts)
     # the same linear value gives the same output in every burst: frame 1 and frame 4 (first and second bursts)
     assert bursts[0][1][2, 0, 0, 0] > 0
     linear = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(gain="none")))
     assert all(b.dtype == np.uint16 for _, b in linear.bursts())
-    plain = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(
-        percentile=100, target=0.5, curve="linear")))
-    first = next(plain.bursts())[1]
-    assert _values(first) == [0, 0, 128]  # frames 0, 0, 1: linear 0, 0, 100 -> gain * 100 = half of white
+    fixed = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(gain=65535 / 200)))
+    assert _values(next(fixed.bursts())[1]) == [0, 0, 128]  # the default curve is linear: 100 -> half of white
+    srgb = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(
+        gain=65535 / 200, curve="srgb")))
+    assert _values(next(srgb.bursts())[1]) == [0, 0, 188]
+
+
+def test_gain_measures_the_scene_not_the_noise():
+    """A moonless frame: about 6 counts at white over a black level, read noise 4 counts.  The
+    99.5th percentile of single noisy pixels is far above white; that of the burst's mean over
+    4x4 blocks is near white, so the gain maps white (not the noise peaks) near the target."""
+    rng = np.random.default_rng(0)
+    white = 6 / 3839  # linear value of the scene's white
+    scene = np.full((96, 128), 0.2 * white)
+    scene[:, :16] = white  # 1/8 of the frame is white
+    counts = rng.poisson(np.broadcast_to(scene / white * 3, (5, 96, 128))) * 2 + rng.normal(0, 4, (5, 96, 128))
+    frames = np.clip(counts / 6 * white, 0, None)[..., None].repeat(3, -1)
+    burst = np.round(frames * 65535).astype(np.uint16)
+    gain = Normalisation(target=0.8).estimate_gain(burst)
+    assert 0.6 < gain * white <= 0.8  # white near the target (the mean keeps a little noise)
+    noisy = Normalisation(target=0.8, binning=1).estimate_gain(burst[:1])  # single pixels of one frame
+    assert noisy * white < 0.35  # the noise peaks go to the target, white far below it
 
 
 def test_dng_frames_read_linear_and_without_cfa_fail_clearly(tmp_path):
@@ -155,3 +174,5 @@ def test_options_are_checked():
         RecordingOptions(every=0)
     with pytest.raises(ValueError, match="gain"):
         Normalisation(gain="bright")
+    with pytest.raises(ValueError, match="binning"):
+        Normalisation(binning=0)
