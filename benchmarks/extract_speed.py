@@ -42,8 +42,8 @@ def _make_burst(size: tuple[int, int], frames: int) -> np.ndarray:
 
 
 def run_child(path: str, args: argparse.Namespace) -> dict:
-    from lburst.extract import LBurst
-    from lburst.model import LBurstNet, NetConfig
+    from lburst.model.extractor import LBurst
+    from lburst.model.network import LBurstNet, NetConfig
 
     torch.set_num_threads(args.threads)
     device = args.device
@@ -128,8 +128,8 @@ def main() -> int:
     if "onnx" in args.paths:  # export here, so the onnx child's peak memory is that of running it
         import tempfile
 
-        from lburst.export_onnx import export_onnx
-        from lburst.model import LBurstNet, NetConfig, save_checkpoint
+        from lburst.model.network import LBurstNet, NetConfig, save_checkpoint
+        from lburst.model.onnx import export_onnx
 
         folder = Path(tempfile.mkdtemp(prefix="lburst-speed-"))
         checkpoint = args.weights

@@ -24,7 +24,7 @@ def measure(frames: int, batch: int, crop: int, steps: int, device: str, precisi
             memory_format: str = "channels_last") -> dict:
     import skimage.data
 
-    from lburst.model import LBurstNet, NetConfig, training_memory_format
+    from lburst.model.network import LBurstNet, NetConfig, training_memory_format
     from lburst.train.loop import training_step
     from lburst.train.pairs import PairConfig, training_pair
 
@@ -69,7 +69,7 @@ def main() -> int:
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--crop", type=int, default=192)
     p.add_argument("--steps", type=int, default=3)
-    from lburst.model import AUTOCAST_DTYPES
+    from lburst.model.network import AUTOCAST_DTYPES
 
     p.add_argument("--precision", nargs="+", default=["fp32"], choices=list(AUTOCAST_DTYPES),
                    help="autocast of the forward pass (each is measured)")

@@ -11,20 +11,20 @@ import importlib
 __version__ = "0.1.0"
 
 _EXPORTS = {
-    "LBurst": "lburst.extract",
-    "MultiScaleConfig": "lburst.extract",
+    "LBurst": "lburst.model.extractor",
+    "MultiScaleConfig": "lburst.model.extractor",
     "Features": "lburst.features",
-    "LBurstNet": "lburst.model",
-    "NetConfig": "lburst.model",
-    "CheckpointError": "lburst.model",
-    "load_checkpoint": "lburst.model",
-    "save_checkpoint": "lburst.model",
+    "LBurstNet": "lburst.model.network",
+    "NetConfig": "lburst.model.network",
+    "CheckpointError": "lburst.model.network",
+    "load_checkpoint": "lburst.model.network",
+    "save_checkpoint": "lburst.model.network",
     "BurstError": "lburst.io",
     "load_burst": "lburst.io",
     "save_burst": "lburst.io",
     "simulate_burst": "lburst.simulate",
 }
-_MODULES = ("methods", "matching", "noise", "simulate", "io", "match", "model", "extract")
+_MODULES = ("methods", "matching", "noise", "simulate", "io", "match", "model")
 
 __all__ = sorted(_EXPORTS) + list(_MODULES)
 

@@ -24,7 +24,7 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("bench", "reconstruction"), "lburst.bench.reconstruction", "reconstruction benchmark on burst scenes"),
     (("reconstruct",), "lburst.sfm.reconstruct", "a 3D model of a burst scene with COLMAP"),
     (("demo",), "lburst.demo", "synthetic night flight: LBurst vs SIFT, with a report"),
-    (("export", "onnx"), "lburst.export_onnx", "export a network to ONNX"),
+    (("export", "onnx"), "lburst.model.onnx", "export a network to ONNX"),
 ]
 
 

@@ -123,8 +123,8 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from lburst.extract import LBurst
     from lburst.methods import create
+    from lburst.model.extractor import LBurst
     from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
     from lburst.sfm.metrics import markdown_table
     from lburst.sfm.reconstruct import reconstruct_scene

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import torch
 
-from lburst import model as model_module
 from lburst.cli import COMMANDS, build_parser, main
 from lburst.io import atomic_path, remove_stale_temporaries, save_burst
+from lburst.model import network as model_module
 
 RUN_CLI = "import sys; from lburst.cli import main; sys.exit(main(sys.argv[1:]))"
 

@@ -5,9 +5,9 @@ import cv2
 import numpy as np
 import pytest
 
-from lburst.extract import LBurst
 from lburst.io import BurstError, load_burst
-from lburst.model import LBurstNet, NetConfig
+from lburst.model.extractor import LBurst
+from lburst.model.network import LBurstNet, NetConfig
 
 
 @pytest.fixture(scope="module")

@@ -122,9 +122,9 @@ def test_align_wrapper_removes_the_burst_motion_before_the_inner_method():
 
 
 def test_weights_trained_on_aligned_bursts_align_them_before_the_network(tmp_path):
-    from lburst.extract import LBurst
     from lburst.methods.merge import align_burst
-    from lburst.model import load_checkpoint, save_checkpoint
+    from lburst.model.extractor import LBurst
+    from lburst.model.network import load_checkpoint, save_checkpoint
     from lburst.weights import weights_path
 
     net, _ = load_checkpoint(weights_path("lburst-b5"))

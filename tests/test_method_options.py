@@ -93,7 +93,7 @@ def test_learned_methods_are_found_by_their_options_and_weights(tmp_path):
 
 
 def test_learned_options_default_to_the_papers_multiscale_settings():
-    from lburst.extract import MultiScaleConfig
+    from lburst.model.extractor import MultiScaleConfig
 
     options = parse_options(LearnedOptions, {"top_k": "none", "precision": "bf16"}, "lburst")
     assert options.top_k is None and options.precision == "bf16"

@@ -5,8 +5,15 @@ import pytest
 import torch
 from scipy.spatial import cKDTree
 
-from lburst.extract import LBurst, frame_permutation
-from lburst.model import CheckpointError, LBurstNet, NetConfig, load_checkpoint, normalize_burst, save_checkpoint
+from lburst.model.extractor import LBurst, frame_permutation
+from lburst.model.network import (
+    CheckpointError,
+    LBurstNet,
+    NetConfig,
+    load_checkpoint,
+    normalize_burst,
+    save_checkpoint,
+)
 
 CHECKPOINTS = {"lburst_b5": "RoBLo_N16_B5.pt", "r2d2": "R2D2.pt"}
 
@@ -65,7 +72,7 @@ TILINGS = {"default tiles": {}, "bands of 3 rows": {"head_band_rows": 3}, "strip
 @pytest.mark.parametrize("size", [(75, 98), (64, 80)])
 def test_fast_network_matches_the_plain_one(size, tiling):
     """Same maps and descriptors (the keypoint identity is checked on the reference burst above)."""
-    from lburst.fast import FastLBurstNet, descriptors_at
+    from lburst.model.fast import FastLBurstNet, descriptors_at
 
     torch.manual_seed(0)
     net = LBurstNet(NetConfig(frames=3)).eval()
@@ -87,7 +94,7 @@ def test_fast_network_matches_the_plain_one(size, tiling):
 @pytest.mark.parametrize("rows", [1, 3, 8])
 def test_banded_heads_match_the_whole_map(rows):
     """Bands of 1, 3 (not dividing 37) and 8 rows, each cut with its context rows."""
-    from lburst.fast import FastLBurstNet
+    from lburst.model.fast import FastLBurstNet
 
     torch.manual_seed(0)
     net = LBurstNet(NetConfig(frames=1)).eval()
@@ -102,7 +109,7 @@ def test_banded_heads_match_the_whole_map(rows):
 @pytest.mark.parametrize("rows", [2, 4, 6, 200])
 def test_striped_front_layers_match_the_whole_map(rows):
     """Stripes of 2 to 6 rows (the first and last touch the zero padding) and one stripe, odd height."""
-    from lburst.fast import FastLBurstNet
+    from lburst.model.fast import FastLBurstNet
 
     torch.manual_seed(0)
     fast = FastLBurstNet(LBurstNet(NetConfig(frames=1)).eval(), stripe_rows=rows)
@@ -115,7 +122,7 @@ def test_striped_front_layers_match_the_whole_map(rows):
 
 
 def test_stripes_must_have_an_even_number_of_rows():
-    from lburst.fast import FastLBurstNet
+    from lburst.model.fast import FastLBurstNet
 
     with pytest.raises(ValueError, match="stripe_rows"):
         FastLBurstNet(LBurstNet(NetConfig(frames=1)), stripe_rows=3)

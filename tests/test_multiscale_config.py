@@ -4,9 +4,9 @@ forever, upsample without bound or divide by zero is a ``ValueError`` naming the
 import numpy as np
 import pytest
 
-from lburst.extract import LBurst, MultiScaleConfig
 from lburst.methods import create
-from lburst.model import LBurstNet, NetConfig
+from lburst.model.extractor import LBurst, MultiScaleConfig
+from lburst.model.network import LBurstNet, NetConfig
 
 
 @pytest.mark.parametrize("options, field", [

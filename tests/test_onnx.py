@@ -6,10 +6,10 @@ import torch
 
 pytest.importorskip("onnxruntime")
 
-from lburst.export_onnx import OnnxRunner, export_onnx  # noqa: E402
-from lburst.extract import LBurst  # noqa: E402
-from lburst.fast import FastLBurstNet  # noqa: E402
-from lburst.model import CheckpointError, LBurstNet, NetConfig, save_checkpoint  # noqa: E402
+from lburst.model.extractor import LBurst  # noqa: E402
+from lburst.model.fast import FastLBurstNet  # noqa: E402
+from lburst.model.network import CheckpointError, LBurstNet, NetConfig, save_checkpoint  # noqa: E402
+from lburst.model.onnx import OnnxRunner, export_onnx  # noqa: E402
 
 
 @pytest.fixture(scope="module")

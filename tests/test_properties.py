@@ -14,9 +14,9 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from hypothesis.extra import numpy as hnp  # noqa: E402
 
-from lburst.extract import LBurst, MultiScaleConfig  # noqa: E402
 from lburst.io import BurstError, load_burst  # noqa: E402
-from lburst.model import LBurstNet, NetConfig  # noqa: E402
+from lburst.model.extractor import LBurst, MultiScaleConfig  # noqa: E402
+from lburst.model.network import LBurstNet, NetConfig  # noqa: E402
 
 EXAMPLES = int(os.environ.get("LBURST_HYPOTHESIS_EXAMPLES", "40"))
 SETTINGS = settings(max_examples=EXAMPLES, deadline=None,

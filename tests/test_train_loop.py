@@ -9,7 +9,7 @@ import pytest
 import skimage.data
 import torch
 
-from lburst.model import LBurstNet, NetConfig, load_checkpoint
+from lburst.model.network import LBurstNet, NetConfig, load_checkpoint
 from lburst.train.data import PairDataset, list_photos
 from lburst.train.loop import TrainConfig, train, training_step
 from lburst.train.pairs import PairConfig
@@ -299,7 +299,7 @@ def test_sigterm_stops_a_run_like_ctrl_c_keeping_its_finished_steps(photos, tmp_
 
 
 def test_a_burst_network_replicated_from_a_single_image_one_equals_it_on_the_mean():
-    from lburst.model import replicate_frames
+    from lburst.model.network import replicate_frames
 
     torch.manual_seed(0)
     single = LBurstNet(NetConfig(frames=1)).eval()

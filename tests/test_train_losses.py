@@ -130,7 +130,7 @@ def test_logit_margin_loss_is_zero_inside_the_margin_and_pulls_saturated_logits_
 
 def test_saturated_reliability_recovers_only_with_the_logit_margin_loss():
     """Why TrainConfig.rel_logit_weight exists: a saturated softmax passes no gradient."""
-    from lburst.model import LBurstNet, NetConfig
+    from lburst.model.network import LBurstNet, NetConfig
     from lburst.train.losses import logit_margin_loss
 
     torch.manual_seed(0)

@@ -11,7 +11,7 @@ import pytest
 import skimage.data
 import torch
 
-from lburst.model import CheckpointError, training_memory_format
+from lburst.model.network import CheckpointError, training_memory_format
 from lburst.train.loop import TrainConfig, check_resume_options, configure_parser, given_options, train
 from lburst.train.pairs import PairConfig
 
@@ -79,7 +79,7 @@ def test_training_memory_format_by_name(name, expected):
 
 
 def test_training_memory_format_auto_follows_the_device_and_cpu(monkeypatch):
-    import lburst.model as model
+    import lburst.model.network as model
 
     assert training_memory_format("cuda", "auto") is torch.channels_last
     monkeypatch.setattr(model, "_cpu_flags", lambda: {"avx2", "fma"})

@@ -22,7 +22,7 @@ from tqdm import tqdm
 from lburst import store
 from lburst.io import BurstError, atomic_path, load_burst, read_features_npz, write_features_h5
 from lburst.methods import accepts, create
-from lburst.model import AUTOCAST_DTYPES, CheckpointError
+from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
 from lburst.sources import add_recording_arguments, is_recording, open_recording, recording_options
 
 

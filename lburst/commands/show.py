@@ -7,9 +7,9 @@ import sys
 from pathlib import Path
 
 from lburst.commands.extract import burst_name
-from lburst.extract import LBurst
 from lburst.io import BurstError, load_burst
-from lburst.model import CheckpointError
+from lburst.model.extractor import LBurst
+from lburst.model.network import CheckpointError
 from lburst.viz import plot_keypoints_and_maps
 
 

@@ -8,10 +8,10 @@ from typing import Literal
 
 import numpy as np
 
-from lburst.extract import LBurst, MultiScaleConfig
 from lburst.features import Features
 from lburst.methods import register
-from lburst.model import autocast_dtype
+from lburst.model.extractor import LBurst, MultiScaleConfig
+from lburst.model.network import autocast_dtype
 
 DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "r2d2": "lburst-b1"}
 
@@ -40,7 +40,7 @@ def results_key(spec: str) -> str:
 @dataclass(frozen=True)
 class LearnedOptions:
     """Options of a learned method: loading (``frame_order``, ``device``), how many
-    keypoints (``top_k``; ``none``: all) and the :class:`lburst.extract.MultiScaleConfig`
+    keypoints (``top_k``; ``none``: all) and the :class:`lburst.model.extractor.MultiScaleConfig`
     fields below (the paper's defaults)."""
 
     top_k: int | None = 4000

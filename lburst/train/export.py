@@ -6,7 +6,7 @@ from pathlib import Path
 
 import torch
 
-from lburst.model import LBurstNet, config_from_net_string, save_checkpoint
+from lburst.model.network import LBurstNet, config_from_net_string, save_checkpoint
 
 
 def export_weights(run_checkpoint: str | Path, out: str | Path, **meta) -> Path:

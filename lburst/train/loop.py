@@ -26,7 +26,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from lburst.io import atomic_path
-from lburst.model import (
+from lburst.model.network import (
     AUTOCAST_DTYPES,
     IMAGENET_MEAN,
     IMAGENET_STD,

@@ -20,9 +20,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from lburst.fast import FastLBurstNet, descriptors_at
 from lburst.features import Features
-from lburst.model import LBurstNet, check_device, check_precision, load_checkpoint, normalize_burst
+from lburst.model.fast import FastLBurstNet, descriptors_at
+from lburst.model.network import LBurstNet, check_device, check_precision, load_checkpoint, normalize_burst
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,7 @@ class MultiScaleConfig:
         top_k: keep the best ``top_k`` keypoints by score (``None``: all).
         published_coordinates: map level coordinates as the published code does
             (``x * W / w``) instead of the pixel-centre-correct mapping.
-        fast: use :class:`lburst.fast.FastLBurstNet` (same features, less work);
+        fast: use :class:`lburst.model.fast.FastLBurstNet` (same features, less work);
             ``False`` runs the plain network as the published code does.
         precision: ``'fp32'``, or ``'bf16'``/``'fp16'`` for the fast path's backbone
             (autocast; heads stay fp32): faster where the hardware has it, not identical.
@@ -59,7 +59,7 @@ class MultiScaleConfig:
     def __post_init__(self) -> None:
         """``ValueError`` naming the field for any value outside its range (every use of
         the settings goes through here, so no loop below can run away)."""
-        from lburst.model import autocast_dtype
+        from lburst.model.network import autocast_dtype
 
         for name in ("min_size", "max_size"):
             value = getattr(self, name)
@@ -147,7 +147,7 @@ class LBurst:
         align: bool = False,
     ) -> None:
         """``net``: the network; or ``runner`` (with ``frames``): any callable with the
-        signature of :meth:`lburst.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session.
+        signature of :meth:`lburst.model.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session.
         ``align``: the weights were trained on aligned bursts (their checkpoint says
         ``meta['input'] == 'aligned'``): the ``lburst`` method (:mod:`lburst.methods.learned`)
         then warps a burst's frames onto the common frame before :meth:`extract`, as
@@ -181,7 +181,7 @@ class LBurst:
     @classmethod
     def from_onnx(cls, path: str | Path, frame_order: str = "temporal", threads: int | None = None) -> "LBurst":
         """Run a model exported by ``lburst export onnx`` with ONNX Runtime (CPU)."""
-        from lburst.export_onnx import OnnxRunner
+        from lburst.model.onnx import OnnxRunner
 
         runner = OnnxRunner(path, threads=threads)
         return cls(None, "cpu", frame_order, runner=runner, frames=runner.frames)

@@ -1,6 +1,6 @@
 """ONNX export of the fast network and an ONNX Runtime backend (``lburst export onnx``).
 
-The exported graph is :meth:`lburst.fast.FastLBurstNet.core`: input ``burst``
+The exported graph is :meth:`lburst.model.fast.FastLBurstNet.core`: input ``burst``
 ``(1, 3N, H, W)`` (normalised, see :func:`lburst.model.normalize_burst`) with dynamic
 height and width; outputs ``repeatability`` and ``reliability`` ``(1, 1, 2*(H//2),
 2*(W//2))`` and ``half``, the raw half-resolution map.  :class:`OnnxRunner` pads odd
@@ -17,9 +17,9 @@ from pathlib import Path
 import torch
 
 from lburst.extras import require
-from lburst.fast import CoreModule, FastLBurstNet, pad_maps
 from lburst.io import atomic_path
-from lburst.model import CheckpointError, load_checkpoint
+from lburst.model.fast import CoreModule, FastLBurstNet, pad_maps
+from lburst.model.network import CheckpointError, load_checkpoint
 
 
 def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Path:

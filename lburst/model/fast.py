@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lburst.model import LBurstNet, autocast_dtype
+from lburst.model.network import LBurstNet, autocast_dtype
 
 
 def fold_batchnorm(ops: nn.ModuleList) -> nn.Sequential:
@@ -189,7 +189,7 @@ class CoreModule(nn.Module):
 
 
 def pad_maps(repeatability: torch.Tensor, reliability: torch.Tensor, size) -> tuple[torch.Tensor, torch.Tensor]:
-    """Zero-pad maps one pixel short along odd input dimensions (see :mod:`lburst.model`)."""
+    """Zero-pad maps one pixel short along odd input dimensions (see :mod:`lburst.model.network`)."""
     pad_h, pad_w = size[0] - repeatability.shape[-2], size[1] - repeatability.shape[-1]
     if pad_w or pad_h:
         repeatability = F.pad(repeatability, (0, pad_w, 0, pad_h))
