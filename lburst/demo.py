@@ -15,10 +15,8 @@ of each noisy common frame, and writes a report folder::
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -109,20 +107,11 @@ def plot_trajectories(reference, results: dict, path: Path) -> None:
         fig.savefig(tmp, dpi=110, format="png")
 
 
-def configure_parser(p: argparse.ArgumentParser) -> None:
-    from lburst.matching import add_matcher_argument
-
-    p.add_argument("--out", type=Path, default=Path("outputs/demo"), help="report folder")
-    p.add_argument("--weights", help="LBurst checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
-    p.add_argument("--noise", default="lowlight:moonless", help="noise of the flight (lburst.noise spec)")
-    p.add_argument("--bursts", type=int, default=15)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--overlap", type=int, default=4, help="match each burst with this many next ones")
-    p.add_argument("--methods", nargs="+", help="methods to compare (default: lburst and sift)")
-    add_matcher_argument(p)
-
-
-def main(args: argparse.Namespace) -> int:
+def run_demo(out: Path, methods: list[str], noise: str = "lowlight:moonless", bursts: int = 15, seed: int = 0,
+             overlap: int = 4, matcher: str = "mnn") -> None:
+    """The night flight with ``bursts`` bursts of ``noise``, reconstructed with each of ``methods``
+    (sequential pairs, ``overlap`` next bursts, the true intrinsics fixed), and the report in
+    ``out`` (module docstring); prints progress and the table."""
     from lburst.methods import create
     from lburst.model.extractor import LBurst
     from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
@@ -130,14 +119,8 @@ def main(args: argparse.Namespace) -> int:
     from lburst.sfm.reconstruct import reconstruct_scene
     from lburst.viz import plot_keypoints_and_maps
 
-    try:
-        methods = args.methods or [lburst_spec(args.weights), "sift"]
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    cfg = replace(NightFlightConfig(), n_bursts=args.bursts, noise=args.noise, seed=args.seed)
+    cfg = replace(NightFlightConfig(), n_bursts=bursts, noise=noise, seed=seed)
     print(f"[1/3] night flight: {cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, noise {cfg.noise}")
     reference = make_night_flight(out / "scene", cfg)
     results, rows = {}, []
@@ -148,7 +131,7 @@ def main(args: argparse.Namespace) -> int:
         # the drone's camera is calibrated: both methods get the true intrinsics, fixed, and
         # sequential pairs along the trajectory
         result = reconstruct_scene(out / "scene", spec, out / label, camera="reference", fix_intrinsics=True,
-                                   pairs="sequential", overlap=args.overlap, matcher=args.matcher)
+                                   pairs="sequential", overlap=overlap, matcher=matcher)
         results[label] = result
         rows.append({"method": label, "scene": "night flight", **result.metrics})
     print("[3/3] report")
@@ -196,4 +179,3 @@ def main(args: argparse.Namespace) -> int:
         tmp.write_text(json.dumps({"config": cfg.to_dict(), "rows": rows}, indent=1, default=str))
     print(table)
     print(f"\nreport: {(out / 'report.md').resolve()}")
-    return 0

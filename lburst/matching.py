@@ -165,22 +165,3 @@ class RatioTest:
 def ratio(options: RatioOptions) -> RatioTest:
     """Lowe's ratio test on descriptor distances (mutual by default)."""
     return RatioTest(options)
-
-
-def matcher_spec(spec: str) -> str:
-    """``spec`` if it names a valid matcher with valid options (an argparse ``type``)."""
-    import argparse
-
-    try:
-        create(spec)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return spec
-
-
-def add_matcher_argument(parser) -> None:
-    """``--matcher SPEC`` on a command's parser, checked before the command starts."""
-    names = ", ".join(m.name for m in available())
-    parser.add_argument("--matcher", type=matcher_spec, default=DEFAULT,
-                        help=f"how to match descriptors: {names}, with options as NAME,KEY=VALUE "
-                             f"(default {DEFAULT}; `lburst methods` lists them)")

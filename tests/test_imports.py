@@ -1,5 +1,5 @@
-"""The import structure: no cycles between lburst modules or packages, and the COLMAP
-child process (with the pose metrics) free of torch, OpenCV and tqdm."""
+"""The import structure: no cycles between lburst modules or packages, argument parsing only
+in lburst/cli/, and the COLMAP child process (with the pose metrics) free of torch, OpenCV and tqdm."""
 
 from __future__ import annotations
 
@@ -11,12 +11,6 @@ from pathlib import Path
 import lburst
 
 ROOT = Path(lburst.__file__).parent
-
-# A runtime cycle that is known and waits for its fix: the `simulate flight` command's
-# options live in night_flight.py, which calls flight_recording for --video/--dng, while
-# flight_recording renders through night_flight. Remove the entry when the command's
-# code moves out of the library module; the test fails if a listed cycle is gone.
-KNOWN_CYCLES = {frozenset({"lburst.scenes.flight_recording", "lburst.scenes.night_flight"})}
 
 
 def module_names() -> dict[str, Path]:
@@ -114,13 +108,24 @@ def test_the_import_graph_is_read():
 
 
 def test_no_two_modules_import_each_other():
-    found = [c for c in cycles(import_graph()) if frozenset(c) not in KNOWN_CYCLES]
+    found = cycles(import_graph())
     assert not found, f"import cycles between modules: {[sorted(c) for c in found]}"
 
 
-def test_known_cycles_still_exist():
-    present = {frozenset(c) for c in cycles(import_graph())}
-    assert KNOWN_CYCLES <= present, f"fixed, remove from KNOWN_CYCLES: {KNOWN_CYCLES - present}"
+def imports_argparse(path: Path) -> bool:
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import) and any(a.name.split(".")[0] == "argparse" for a in node.names):
+            return True
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "argparse":
+            return True
+    return False
+
+
+def test_only_the_command_line_parses_arguments():
+    """Every parser lives in lburst/cli/; library modules take typed arguments."""
+    found = sorted(name for name, path in module_names().items()
+                   if name != "lburst.cli" and not name.startswith("lburst.cli.") and imports_argparse(path))
+    assert not found, f"modules outside lburst/cli/ that import argparse: {found}"
 
 
 def test_no_two_packages_import_each_other():
@@ -133,7 +138,7 @@ def test_no_two_packages_import_each_other():
 
 
 def test_colmap_child_and_poses_import_no_torch_opencv_or_tqdm():
-    code = ("import sys, lburst.sfm.colmap, lburst.sfm.poses\n"
+    code = ("import sys, lburst.cli.colmap_job, lburst.sfm.colmap, lburst.sfm.poses\n"
             "print(','.join(m for m in ('torch', 'cv2', 'tqdm', 'pycolmap', 'matplotlib') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lburst.cli.options import matcher_spec
 from lburst.match import mutual_nearest_neighbours
-from lburst.matching import available, create, matcher_spec
+from lburst.matching import available, create
 
 
 def feats(desc: np.ndarray) -> dict:

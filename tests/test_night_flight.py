@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from lburst.cli import simulate_flight as flight_command
 from lburst.scenes import night_flight as nf
 from lburst.scenes.city import BUILDING, City, CityConfig
 from lburst.scenes.raycast import intrinsics
@@ -233,12 +234,12 @@ def test_command_line(tmp_path, capsys):
     import argparse
 
     parser = argparse.ArgumentParser()
-    nf.configure_parser(parser)
+    flight_command.configure_parser(parser)
     out = tmp_path / "flight"
-    assert nf.main(parser.parse_args([str(out), "--bursts", "2", "--frames", "3", "--size", "48x32", "--daylight"])) == 0
+    assert flight_command.main(parser.parse_args([str(out), "--bursts", "2", "--frames", "3", "--size", "48x32", "--daylight"])) == 0
     assert Reference.load(out / "reference.json").camera["width"] == 48
     assert len(list((out / "0001").glob("frame_*.png"))) == 3
-    assert nf.main(parser.parse_args([str(out), "--frames", "4"])) == 2
+    assert flight_command.main(parser.parse_args([str(out), "--frames", "4"])) == 2
     assert "odd" in capsys.readouterr().err
 
 

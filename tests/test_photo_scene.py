@@ -97,7 +97,7 @@ def test_reference_options_are_kept_and_a_change_remakes_the_reference(photos):
 def test_cli_reference_options():
     import argparse
 
-    from lburst.scenes.photo_scene import configure_parser
+    from lburst.cli.simulate_scene import configure_parser
 
     parser = argparse.ArgumentParser()
     configure_parser(parser)

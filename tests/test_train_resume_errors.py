@@ -11,8 +11,9 @@ import pytest
 import skimage.data
 import torch
 
+from lburst.cli.train import configure_parser, given_options
 from lburst.model.network import CheckpointError, training_memory_format
-from lburst.train.loop import TrainConfig, check_resume_options, configure_parser, given_options, train
+from lburst.train.loop import TrainConfig, check_resume_options, train
 from lburst.train.pairs import PairConfig
 
 TINY = PairConfig(frames=3, crop=64, long_side=(160, 256), max_burst_motion=6, max_pair_shift=6)

@@ -31,11 +31,9 @@ run again; each file also keeps the seconds its extraction took.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import re
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -310,34 +308,3 @@ def plot_mma(results: dict, path: Path) -> None:
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100, format="png")
-
-
-def configure_parser(p: argparse.ArgumentParser) -> None:
-    from lburst.matching import add_matcher_argument
-
-    p.add_argument("data", type=Path, help="folder of sequence folders (Oxford or HPatches layout)")
-    p.add_argument("--methods", nargs="+", default=["lburst", "sift", "orb", "merge+sift"])
-    p.add_argument("--sigma", type=float, nargs="+", default=[25, 50, 100], help="Gaussian noise std levels (0..255)")
-    p.add_argument("--noise", nargs="*", default=[], help="extra noise levels as lburst.noise specs")
-    p.add_argument("--max-side", type=int)
-    p.add_argument("--top-k", type=int, default=5000)
-    p.add_argument("--out", type=Path, default=Path("outputs/homography"))
-    p.add_argument("--burst-rotation", type=float, default=0.0, metavar="DEG",
-                   help="largest in-burst rotation per frame (degrees; 0: translation only)")
-    p.add_argument("--burst-zoom", type=float, default=0.0, metavar="Z", help="largest in-burst zoom per frame (0.01: 1%%)")
-    p.add_argument("--burst-flow", type=float, default=0.0, metavar="PX",
-                   help="largest std of the smooth non-uniform in-burst flow per frame (pixels)")
-    add_matcher_argument(p)
-
-
-def main(args: argparse.Namespace) -> int:
-    try:
-        motion = MotionRange(args.burst_rotation, args.burst_zoom, args.burst_flow)
-        results = run_homography_benchmark(args.data, args.methods, args.sigma, args.out, args.noise,
-                                           args.max_side, args.top_k, motion=motion, matcher=args.matcher)
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(markdown(results))
-    print(f"results: {args.out / 'results.json'}, {args.out / 'results.md'}, {args.out / 'mma.png'}")
-    return 0

@@ -17,7 +17,6 @@ scenes) is printed as markdown and written to ``OUT/table.md`` and ``OUT/results
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import re
@@ -121,34 +120,3 @@ def run_benchmark(scenes: list[str | Path], methods: list[str], out_dir: str | P
     with atomic_path(out_dir / "results.json") as tmp:
         tmp.write_text(json.dumps(report, indent=1))
     return report
-
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    from lburst.matching import add_matcher_argument
-
-    parser.add_argument("scenes", nargs="+", help="scene folders (see lburst reconstruct)")
-    parser.add_argument("--methods", nargs="+", default=["sift", "merge+sift", "lburst"], help="method specs")
-    parser.add_argument("--out", required=True, help="output folder: OUT/<method>/<scene>/, table.md, results.json")
-    parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto")
-    parser.add_argument("--overlap", type=int, default=10)
-    parser.add_argument("--fallback-exhaustive", action="store_true")
-    parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
-    parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
-    parser.add_argument("--single-camera", action="store_true", help="one camera for all images of a scene")
-    parser.add_argument("--threads", type=int, default=2)
-    add_matcher_argument(parser)
-    parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")
-
-
-def main(args: argparse.Namespace) -> int:
-    from lburst.sfm.metrics import markdown_table
-
-    report = run_benchmark(args.scenes, args.methods, args.out, force=args.force, pairs=args.pairs,
-                           overlap=args.overlap, fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
-                           camera=args.camera, single_camera=args.single_camera, num_threads=args.threads,
-                           matcher=args.matcher)
-    table = markdown_table(report["rows"] + report["means"])
-    with atomic_path(Path(args.out) / "table.md") as tmp:
-        tmp.write_text(table + "\n")
-    print(table)
-    return 0

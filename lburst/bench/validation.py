@@ -21,9 +21,7 @@ is the same on every machine; ``manifest.json`` records the photos, the rule and
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
 import cv2
@@ -116,28 +114,3 @@ def make_validation_sequences(photos: list[Path], out: str | Path, seed: int = 0
     with atomic_path(out / "manifest.json") as tmp:
         tmp.write_text(json.dumps(manifest, indent=1))
     return folders
-
-
-def configure_parser(p: argparse.ArgumentParser) -> None:
-    from lburst.paths import shared_dir
-
-    p.add_argument("photos", nargs="*", type=Path,
-                   help="photo folders (default: $LBURST_SHARED/data/train512); only their validation tenth is used")
-    p.add_argument("--out", type=Path, default=Path("data/validation"), help="folder of sequence folders")
-    p.add_argument("--split", choices=("validation", "all"), default="validation",
-                   help="which photos: the held-out tenth (never trained on) or all")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random draw")
-    p.set_defaults(_default_photos=shared_dir() / "data" / "train512")
-
-
-def main(args: argparse.Namespace) -> int:
-    from lburst.train.data import list_photos
-
-    try:
-        photos = list_photos(args.photos or [args._default_photos], split=args.split)
-        folders = make_validation_sequences(photos, args.out, args.seed)
-    except (FileNotFoundError, ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(f"{len(folders)} sequences in {args.out}")
-    return 0

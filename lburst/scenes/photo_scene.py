@@ -26,10 +26,8 @@ same, else it reconstructs the clean photos again (the SIFT features stay cached
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
-import sys
 import tempfile
 from pathlib import Path
 
@@ -147,46 +145,3 @@ def simulate_scene(photos: str | Path, out: str | Path, frames: int = 5, motion_
     if made is None:
         (out / "reference.json").unlink(missing_ok=True)  # one made with other options is not this reference
     return made
-
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("photos", help="folder of photos of one scene (natural order = trajectory order)")
-    parser.add_argument("--out", required=True, help="scene folder to write")
-    parser.add_argument("--frames", type=int, default=5, help="frames per burst (odd)")
-    parser.add_argument("--motion-px", type=float, default=2.0, help="largest in-burst motion, pixels per frame")
-    parser.add_argument("--noise", default="gaussian:50", help="noise spec (lburst.noise), or 'none'")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--no-reference", action="store_true", help="skip the clean SIFT reconstruction")
-    parser.add_argument("--reference-single-camera", action="store_true",
-                        help="one shared COLMAP camera for all clean photos in the reference reconstruction "
-                             "(when their priors agree), for a set shot with one camera; default: one camera "
-                             "per photo (lund needs this and --reference-fix-intrinsics)")
-    parser.add_argument("--reference-fix-intrinsics", action="store_true",
-                        help="keep the reference cameras at their prior (EXIF focal length, no distortion) "
-                             "instead of refining them; with --reference-single-camera for forward motion (lund)")
-    parser.add_argument("--reference-threads", type=int, default=2,
-                        help="COLMAP threads for the reference reconstruction (its result depends on them)")
-
-
-def main(args: argparse.Namespace) -> int:
-    from lburst.sfm.reconstruct import ReconstructionError
-
-    try:
-        ref = simulate_scene(args.photos, args.out, args.frames, args.motion_px, args.noise, args.seed,
-                             reference=not args.no_reference,
-                             reference_options={"single_camera": args.reference_single_camera,
-                                                "fix_intrinsics": args.reference_fix_intrinsics,
-                                                "num_threads": args.reference_threads})
-    except (SceneError, ReconstructionError, ValueError) as err:
-        print(f"lburst simulate scene: {err}", file=sys.stderr)
-        return 1
-    if not args.no_reference:
-        if ref is None:
-            print(f"lburst simulate scene: the clean photos did not reconstruct; {args.out} has no reference",
-                  file=sys.stderr)
-            return 1
-        total = len([i for i in list_scene(args.photos).items if i.kind == "image"])
-        print(f"reference: {len(ref.poses)}/{total} photos registered ({REFERENCE_SOURCE}) "
-              f"in {Path(args.out) / 'reference.json'}")
-    print(f"scene written to {args.out}")
-    return 0

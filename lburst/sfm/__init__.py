@@ -3,7 +3,7 @@
 Public API: :func:`reconstruct_scene` (one scene, one feature method) returning a
 :class:`ReconstructionResult`, and :func:`evaluate_against_reference` (trajectory
 errors and match precision against a scene's ``reference.json``).  They are imported on
-first use, so that the COLMAP child (``python -m lburst.sfm.colmap``) and
+first use, so that the COLMAP child (``python -m lburst.cli.colmap_job``) and
 :mod:`lburst.sfm.poses` import no torch.
 """
 

@@ -2,7 +2,7 @@
 geometric verification, mapping, and export of the largest model.
 
 Everything that calls pycolmap runs in a child process (:func:`run_job` through
-``python -m lburst.sfm.colmap JOB_DIR``) because COLMAP aborts the whole process on some
+``python -m lburst.cli.colmap_job JOB_DIR``) because COLMAP aborts the whole process on some
 inputs (failed ``CHECK``s); the parent reads the files the child leaves in ``JOB_DIR``:
 
 - written by the parent: ``job.json`` (:class:`ColmapJob`) and ``input.npz`` with
@@ -22,7 +22,6 @@ pointer`` (their bundled zlib/libpng clash).
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -36,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from lburst.extras import LazyModule
-from lburst.process import die_with_parent, folder_lock
+from lburst.process import folder_lock
 
 # Imported on first use, after cv2 (see the module docstring), so that importing this
 # module loads neither pycolmap nor OpenCV (nor torch: the child never needs it).
@@ -341,7 +340,7 @@ def run_job_subprocess(job_dir: str | Path, timeout: float | None = None) -> dic
         log_path = job_dir / "colmap.log"
         with open(log_path, "w") as log:
             try:
-                proc = subprocess.run([sys.executable, "-m", "lburst.sfm.colmap", str(job_dir),
+                proc = subprocess.run([sys.executable, "-m", "lburst.cli.colmap_job", str(job_dir),
                                        "--parent", str(os.getpid())], stdout=log, stderr=subprocess.STDOUT,
                                       timeout=timeout)
             except subprocess.TimeoutExpired as err:
@@ -386,18 +385,3 @@ def check_camera(camera: dict) -> None:
         raise ValueError(f"{model} takes {expected} params, got {len(values)}")
     if values[0] <= 0:
         raise ValueError(f"the focal length must be positive, got {values[0]}")
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Run one COLMAP job folder (internal to lburst reconstruct).")
-    parser.add_argument("job_dir")
-    parser.add_argument("--parent", type=int, help="die when this process does (the lburst parent)")
-    args = parser.parse_args(argv)
-    if args.parent:
-        die_with_parent(args.parent)
-    run_job(args.job_dir)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from lburst.commands.extract import burst_name
+from lburst.cli.extract import burst_name
 from lburst.io import BurstError, load_burst
 from lburst.model.extractor import LBurst
 from lburst.model.network import CheckpointError

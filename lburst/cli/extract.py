@@ -20,10 +20,11 @@ from pathlib import Path
 from tqdm import tqdm
 
 from lburst import store
+from lburst.cli.options import add_recording_arguments, recording_options
 from lburst.io import BurstError, atomic_path, load_burst, read_features_npz, write_features_h5
 from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
-from lburst.sources import add_recording_arguments, is_recording, open_recording, recording_options
+from lburst.sources import is_recording, open_recording
 
 
 def burst_name(path: Path) -> str:

@@ -1,6 +1,8 @@
-"""The ``lburst`` command line.  Each subcommand lives in one module, which defines
-``configure_parser(parser)`` (its options) and ``main(args) -> int`` (its exit code);
-this file only wires them up, importing a module when its subcommand runs."""
+"""The ``lburst`` command line, and all of it: every subcommand lives in one module of
+this package (``lburst/cli/<command>.py``), which defines ``configure_parser(parser)``
+(its options) and ``main(args) -> int`` (its exit code); options that several commands
+share are in :mod:`lburst.cli.options`.  This file only wires them up, importing a
+module when its subcommand runs.  No module outside this package parses arguments."""
 
 from __future__ import annotations
 
@@ -12,19 +14,19 @@ import warnings
 
 # (subcommand words, module, one-line help)
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
-    (("extract",), "lburst.commands.extract", "features of bursts to .npz (and hloc features.h5)"),
-    (("show",), "lburst.commands.show", "picture of a burst's keypoints and confidence maps"),
-    (("methods",), "lburst.commands.methods", "feature methods and matchers, with their options and defaults"),
-    (("simulate", "burst"), "lburst.commands.simulate", "a low-light burst from one photo"),
-    (("simulate", "scene"), "lburst.scenes.photo_scene", "a low-light burst scene from a multi-view photo set"),
-    (("simulate", "sequences"), "lburst.bench.validation", "HPatches-style homography sequences from photos"),
-    (("simulate", "flight"), "lburst.scenes.night_flight", "the synthetic night flight scene with exact ground truth"),
-    (("train",), "lburst.train.loop", "self-supervised training of a burst (or single-image) network"),
-    (("bench", "homography"), "lburst.bench.homography", "noisy-burst homography benchmark (MMA, repeatability)"),
-    (("bench", "reconstruction"), "lburst.bench.reconstruction", "reconstruction benchmark on burst scenes"),
-    (("reconstruct",), "lburst.sfm.reconstruct", "a 3D model of a burst scene with COLMAP"),
-    (("demo",), "lburst.demo", "synthetic night flight: LBurst vs SIFT, with a report"),
-    (("export", "onnx"), "lburst.model.onnx", "export a network to ONNX"),
+    (("extract",), "lburst.cli.extract", "features of bursts to .npz (and hloc features.h5)"),
+    (("show",), "lburst.cli.show", "picture of a burst's keypoints and confidence maps"),
+    (("methods",), "lburst.cli.methods", "feature methods and matchers, with their options and defaults"),
+    (("simulate", "burst"), "lburst.cli.simulate_burst", "a low-light burst from one photo"),
+    (("simulate", "scene"), "lburst.cli.simulate_scene", "a low-light burst scene from a multi-view photo set"),
+    (("simulate", "sequences"), "lburst.cli.simulate_sequences", "HPatches-style homography sequences from photos"),
+    (("simulate", "flight"), "lburst.cli.simulate_flight", "the synthetic night flight scene with exact ground truth"),
+    (("train",), "lburst.cli.train", "self-supervised training of a burst (or single-image) network"),
+    (("bench", "homography"), "lburst.cli.bench_homography", "noisy-burst homography benchmark (MMA, repeatability)"),
+    (("bench", "reconstruction"), "lburst.cli.bench_reconstruction", "reconstruction benchmark on burst scenes"),
+    (("reconstruct",), "lburst.cli.reconstruct", "a 3D model of a burst scene with COLMAP"),
+    (("demo",), "lburst.cli.demo", "synthetic night flight: LBurst vs SIFT, with a report"),
+    (("export", "onnx"), "lburst.cli.export_onnx", "export a network to ONNX"),
 ]
 
 
@@ -158,6 +160,3 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted; finished work is kept and a re-run resumes", file=sys.stderr)
         return 130
 
-
-if __name__ == "__main__":
-    sys.exit(main())

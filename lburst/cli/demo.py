@@ -1,0 +1,32 @@
+"""``lburst demo``: the synthetic night flight reconstructed with LBurst and with SIFT, and a report
+(:mod:`lburst.demo`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from lburst.cli.options import add_matcher_argument
+from lburst.demo import lburst_spec, run_demo
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=Path, default=Path("outputs/demo"), help="report folder")
+    p.add_argument("--weights", help="LBurst checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
+    p.add_argument("--noise", default="lowlight:moonless", help="noise of the flight (lburst.noise spec)")
+    p.add_argument("--bursts", type=int, default=15)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--overlap", type=int, default=4, help="match each burst with this many next ones")
+    p.add_argument("--methods", nargs="+", help="methods to compare (default: lburst and sift)")
+    add_matcher_argument(p)
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        methods = args.methods or [lburst_spec(args.weights), "sift"]
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    run_demo(args.out, methods, args.noise, args.bursts, args.seed, args.overlap, args.matcher)
+    return 0

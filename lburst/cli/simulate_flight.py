@@ -1,0 +1,70 @@
+"""``lburst simulate flight``: the synthetic night flight scene (:mod:`lburst.scenes.night_flight`),
+as bursts, a video or DNG frames (:mod:`lburst.scenes.flight_recording`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from lburst.scenes import flight_recording as recording
+from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    """Options of a ``lburst simulate flight``-style command (see :func:`main`)."""
+    default = NightFlightConfig()
+    p.add_argument("out_dir", type=Path, nargs="?", metavar="OUT",
+                   help="scene folder of bursts to write (re-running resumes)")
+    p.add_argument("--out", type=Path, help="the scene folder OUT, given as an option")
+    p.add_argument("--video", type=Path, help="also (or only) write the flight as a continuous MP4 video, with "
+                                              "per-frame ground truth X.gt.txt (TUM) and X.meta.json (camera, fps)")
+    p.add_argument("--dng", type=Path, help="also (or only) write the flight as a folder of 12-bit Bayer DNG frames "
+                                            "(needs --noise lowlight:...), with gt.txt and meta.json inside")
+    p.add_argument("--crf", type=int, default=16, help="H.264 quality of --video (lower: better; default 16)")
+    p.add_argument("--turn", type=float, default=default.turn_deg, help="heading change over the flight, degrees")
+    p.add_argument("--loop", action="store_true", help="fly a loop that passes over its start again (--turn 380)")
+    p.add_argument("--bursts", type=int, default=default.n_bursts, help="number of bursts")
+    p.add_argument("--frames", type=int, default=default.frames_per_burst, help="frames per burst (odd)")
+    p.add_argument("--size", default=f"{default.width}x{default.height}", help="WIDTHxHEIGHT")
+    p.add_argument("--noise", default=default.noise, help="noise spec, e.g. gaussian:50 (default: none)")
+    p.add_argument("--exposure", type=float, default=default.exposure, help="gain before noise")
+    p.add_argument("--daylight", action="store_true", help="no night lighting")
+    p.add_argument("--supersample", type=int, default=default.supersample, help="anti-aliasing factor")
+    p.add_argument("--seed", type=int, default=default.seed)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Render the night flight into ``args.out`` and print where it is."""
+    try:
+        width, height = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        print(f"error: --size must be WIDTHxHEIGHT, got {args.size!r}", file=sys.stderr)
+        return 2
+    if args.out is not None and args.out_dir is not None and args.out != args.out_dir:
+        print(f"error: two scene folders given: {args.out_dir} and --out {args.out}", file=sys.stderr)
+        return 2
+    args.out = args.out or args.out_dir
+    if args.out is None and args.video is None and args.dng is None:
+        print("error: give a scene folder OUT, --video FILE.mp4 or --dng FOLDER", file=sys.stderr)
+        return 2
+    kwargs = dict(n_bursts=args.bursts, frames_per_burst=args.frames, width=width, height=height, noise=args.noise,
+                  exposure=args.exposure, supersample=args.supersample, seed=args.seed,
+                  turn_deg=380.0 if args.loop else args.turn)
+    try:
+        cfg = NightFlightConfig.daylight(**kwargs) if args.daylight else NightFlightConfig(**kwargs)
+        if args.out is not None:
+            ref = make_night_flight(args.out, cfg)
+            print(f"{args.out}: {cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, trajectory {ref.length:.1f} m")
+        if args.video is not None or args.dng is not None:
+            frames = f"{recording.frame_count(cfg)} frames at {recording.fps(cfg):g} fps, {width}x{height}"
+            if args.video is not None:
+                recording.write_flight_video(args.video, cfg, crf=args.crf)
+                print(f"{args.video}: {frames}; ground truth {recording.ground_truth_path(args.video)}")
+            if args.dng is not None:
+                recording.write_flight_dng(args.dng, cfg)
+                print(f"{args.dng}: {frames} (DNG); ground truth {recording.ground_truth_path(args.dng)}")
+    except (ValueError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
