@@ -39,4 +39,4 @@ python3 -m lburst.cli train --data "$data" --out "$run" --device "$device" --wor
 cp "$run/last.pt" "$run/log.csv" "$run/config.json" "$out/"
 if [ -d "$run/snapshots" ]; then tar -cf "$out/snapshots.tar" -C "$run" snapshots; fi
 [ "${LBURST_SPEED:-1}" = 0 ] && exit 0  # LBURST_SPEED=0: training only
-python3 benchmarks/extract_speed.py --device "$device" --paths plain fast bf16 --out "$out/extract_speed.json" 2>&1 | tail -n 20
+python3 scripts/extract_speed.py --device "$device" --paths plain fast bf16 --out "$out/extract_speed.json" 2>&1 | tail -n 20

@@ -83,7 +83,7 @@ def training_memory_format(device: torch.device | str, name: str = "auto") -> to
     """The memory format for training the network: ``channels_last``, ``contiguous``, or
     ``auto``: channels-last on CUDA and on CPUs with AVX-512, contiguous on CPUs without
     it (on a 2-core AVX2 AMD EPYC, one thread, a 5-frame batch of 8 x 192 px: forward +
-    backward 17.4 s channels-last, 13.6 s contiguous; ``benchmarks/train_speed.py``)."""
+    backward 17.4 s channels-last, 13.6 s contiguous; ``scripts/train_speed.py``)."""
     formats = {"channels_last": torch.channels_last, "contiguous": torch.contiguous_format}
     if name == "auto":
         flags = _cpu_flags()

@@ -2,7 +2,7 @@
 
 Prints a table (stage timings come from ``--profile``), writes JSON with ``--out``::
 
-    python benchmarks/buff_speed.py --runs 3 --out buff_speed.json --profile
+    python scripts/buff_speed.py --runs 3 --out buff_speed.json --profile
 
 The burst is scikit-image's astronaut photo resized to 1024x768, moving at a constant
 (1.3, -0.6) px/frame with Gaussian noise (std 25 of 255); ``--threads`` sets OpenCV's

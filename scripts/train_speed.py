@@ -3,7 +3,7 @@
 Times the full step (pair generation excluded: it runs in loader workers, see
 ``pair_s``), forward + three losses + backward + Adam, on random photos' pairs.
 
-    python benchmarks/train_speed.py --frames 5 1 --out outputs/train_speed.json
+    python scripts/train_speed.py --frames 5 1 --out outputs/train_speed.json
 """
 
 from __future__ import annotations

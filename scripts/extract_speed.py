@@ -9,7 +9,7 @@ one warm-up, on random weights unless ``--weights`` is given (the time does not 
 on the weights, the keypoint count does).  ``bf16`` and ``onnx`` also report the share
 of their keypoints within 1 px of a fast fp32 keypoint.
 
-    python benchmarks/extract_speed.py --out outputs/extract_speed.json
+    python scripts/extract_speed.py --out outputs/extract_speed.json
 """
 
 from __future__ import annotations

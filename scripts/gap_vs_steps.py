@@ -2,7 +2,7 @@
 homography protocol (``lburst bench homography``): every snapshot of the given runs, the
 runs' current ``last.pt``, and the ``--also`` methods, all in one benchmark run.
 
-    python benchmarks/gap_vs_steps.py training/lburst-b5-cpu training/lburst-b1-cpu \\
+    python scripts/gap_vs_steps.py training/lburst-b5-cpu training/lburst-b1-cpu \\
         --data ../shared/data/homography --sigma 50 100 --also lburst r2d2 sift \\
         --out outputs/gap_vs_steps
 

@@ -3,7 +3,7 @@
 Made to check whether a change to training (e.g. ``--precision bf16``) leaves the loss
 curve unchanged: run both from the same seed and preset (same data stream), then
 
-    python benchmarks/compare_training_runs.py training/lburst-b1-cpu outputs/train_b1_bf16_check \\
+    python scripts/compare_training_runs.py training/lburst-b1-cpu outputs/train_b1_bf16_check \\
         --labels fp32 bf16 --window 100 --out outputs/compare_b1_bf16.json --plot docs/bf16_training_curves.png
 
 It prints, for each window of steps, each run's mean of every loss component, over the

@@ -5,7 +5,7 @@ boxes), one frame (ray casting and shading, median of ``--repeats``), and the wh
 written to a temporary folder by ``make_night_flight`` (frames, PNG files, reference),
 and reports the overlap of consecutive common frames.  Single-threaded OpenCV.
 
-    python benchmarks/render_speed.py --out outputs/render_speed.json
+    python scripts/render_speed.py --out outputs/render_speed.json
 """
 
 from __future__ import annotations
