@@ -258,17 +258,46 @@ def load_burst(source: str | Path | Sequence[str | Path], frames: slice | tuple[
     return np.stack(images)
 
 
-def save_burst(burst: np.ndarray, folder: str | Path) -> list[Path]:
-    """Write a burst's frames as ``folder/frame_000.png ...`` (8 or 16 bit PNG), atomically each."""
+def frame_name(k: int) -> str:
+    """The file name of frame ``k`` (0-based, temporal order) of a burst folder: ``frame_000.png``."""
+    return f"frame_{k:03d}.png"
+
+
+def save_burst(burst: np.ndarray, folder: str | Path, whole: bool = False) -> list[Path]:
+    """Write a burst's frames as ``folder/frame_000.png ...`` (8 or 16 bit PNG), atomically each.
+
+    ``whole``: write the folder at once instead: the frames go into a temporary folder
+    next to it, which then replaces ``folder`` (and whatever it held), so a burst folder
+    that exists is complete (scenes count a burst as done when its folder exists)."""
     folder = Path(folder)
+    if whole:
+        import shutil
+
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.", suffix=".tmp"))
+        try:
+            for k, frame in enumerate(burst):
+                write_image(tmp / frame_name(k), frame)
+            shutil.rmtree(folder, ignore_errors=True)
+            os.replace(tmp, folder)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        return [folder / frame_name(k) for k in range(len(burst))]
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for i, frame in enumerate(burst):
-        path = folder / f"frame_{i:03d}.png"
+        path = folder / frame_name(i)
         with atomic_path(path) as tmp:
             write_image(tmp, frame)
         paths.append(path)
     return paths
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """A uint8 or uint16 image (any shape) as uint8: uint16 scaled by 255/65535 and rounded."""
+    if image.dtype == np.uint16:
+        return np.clip(np.rint(image * (255.0 / 65535.0)), 0, 255).astype(np.uint8)
+    return image
 
 
 def write_features_npz(path: str | Path, features: dict[str, np.ndarray], image_size: tuple[int, int],

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from lburst.extras import require
-from lburst.io import atomic_path
+from lburst.io import atomic_path, to_uint8
 
 
 def new_figure(figsize: tuple[float, float]):
@@ -18,9 +18,7 @@ def new_figure(figsize: tuple[float, float]):
 
 def to_display(image: np.ndarray) -> np.ndarray:
     """An (H, W, 3) uint8 or uint16 image as uint8 for display."""
-    if image.dtype == np.uint16:
-        return (image / 257).astype(np.uint8)
-    return image
+    return to_uint8(image)
 
 
 def plot_keypoints_and_maps(

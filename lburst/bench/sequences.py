@@ -10,7 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from lburst.io import BurstError, read_image
+from lburst.io import BurstError, read_image, to_uint8
 
 
 @dataclass
@@ -64,7 +64,7 @@ def read_sequence(folder: str | Path, max_side: int | None = None) -> Sequence:
         images = [read_image(_find_image(folder, s)) for s in stems]
     except BurstError as exc:
         raise ValueError(str(exc)) from exc
-    images = [(im / 257).astype(np.uint8) if im.dtype == np.uint16 else im for im in images]
+    images = [to_uint8(im) for im in images]
     homographies = [_read_h(folder / f) for f in hfiles]
     if max_side:
         mats = []

@@ -10,6 +10,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from lburst.io import to_uint8
+
 
 def check_burst(burst: np.ndarray) -> np.ndarray:
     """Return ``burst`` as an array after checking its shape ``(N, H, W, 3)``, N odd, and dtype."""
@@ -50,6 +52,4 @@ def to_gray8(image: np.ndarray) -> np.ndarray:
     if image.dtype not in (np.uint8, np.uint16) or image.ndim != 3 or image.shape[-1] != 3:
         raise ValueError(f"expected an RGB image (H, W, 3) uint8 or uint16, got {image.shape} {image.dtype}")
     luma = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
-    if image.dtype == np.uint16:
-        luma = np.clip(np.rint(luma * (255.0 / 65535.0)), 0, 255).astype(np.uint8)
-    return luma
+    return to_uint8(luma)

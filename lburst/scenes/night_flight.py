@@ -22,9 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -33,7 +30,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lburst.io import atomic_path, write_image
+from lburst.io import atomic_path, save_burst
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
 from lburst.scenes.raycast import cast, intrinsics, rays_through
 from lburst.scenes.reference import Reference
@@ -254,18 +251,6 @@ def clean_common_frames(cfg: NightFlightConfig, city: City | None = None) -> dic
     return out
 
 
-def _write_burst(directory: Path, frames: np.ndarray) -> None:
-    """Write the frames into a temporary folder, then rename it onto ``directory``."""
-    tmp = Path(tempfile.mkdtemp(dir=directory.parent, prefix=f".{directory.name}.", suffix=".tmp"))
-    try:
-        for k, frame in enumerate(frames):
-            write_image(tmp / f"frame_{k:03d}.png", frame)
-        os.replace(tmp, directory)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
-
-
 def make_night_flight(out_dir: str | Path, cfg: NightFlightConfig = NightFlightConfig(), progress: bool = True) -> Reference:
     """Render the flight into the scene folder ``out_dir`` and return its reference.
 
@@ -295,7 +280,7 @@ def make_night_flight(out_dir: str | Path, cfg: NightFlightConfig = NightFlightC
             bar = tqdm(bar, desc="night flight", unit="burst")
         for j in bar:
             i = todo[j]
-            _write_burst(out / burst_name(i), render_burst(cfg, i, city))
+            save_burst(render_burst(cfg, i, city), out / burst_name(i), whole=True)
     ref = reference(cfg)
     ref.save(out / "reference.json")
     return ref

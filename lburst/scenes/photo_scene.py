@@ -27,14 +27,12 @@ same, else it reconstructs the clean photos again (the SIFT features stay cached
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from lburst.io import atomic_path, write_image
+from lburst.io import atomic_path, frame_name, save_burst
 from lburst.scenes.reference import Reference
 from lburst.sfm.poses import path_length
 from lburst.sfm.scene import SceneError, list_scene, read_image, save_reference
@@ -43,23 +41,6 @@ REFERENCE_METHOD = "sift"
 REFERENCE_SOURCE = "sift-clean"
 REFERENCE_DIR = ".reference"
 REFERENCE_OPTIONS_FILE = "options.json"
-
-
-def frame_name(k: int) -> str:
-    return f"frame_{k:03d}.png"
-
-
-def write_burst(folder: Path, burst: np.ndarray) -> None:
-    """Write the frames of ``burst`` (N, H, W, 3) RGB into ``folder`` all at once (a temp folder renamed)."""
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}."))
-    try:
-        for k, frame in enumerate(burst):
-            write_image(tmp / frame_name(k), frame)
-        shutil.rmtree(folder, ignore_errors=True)
-        tmp.rename(folder)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def burst_done(folder: Path, frames: int) -> bool:
@@ -133,7 +114,7 @@ def simulate_scene(photos: str | Path, out: str | Path, frames: int = 5, motion_
         rng = np.random.default_rng(stable_seed(seed, item.name))
         motion = random_motion(rng, motion_px)
         burst = simulate_burst(read_image(item.path), frames=frames, motion=motion, noise=noise_model, rng=rng)
-        write_burst(folder, burst)
+        save_burst(burst, folder, whole=True)
     if not reference:
         return None
     reference_options = dict(reference_options or {})

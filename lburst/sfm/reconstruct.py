@@ -30,7 +30,7 @@ from tqdm import tqdm
 
 from lburst import store
 from lburst.features import Features, check_features
-from lburst.io import atomic_path, file_sha1, read_features_npz, write_image
+from lburst.io import atomic_path, file_sha1, read_features_npz, to_uint8, write_image
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, exif_source, list_scene, load_item, reference_cameras
 from lburst.sources import is_recording
@@ -155,13 +155,6 @@ def _utf8(text: str) -> bool:
     except UnicodeEncodeError:
         return False
     return True
-
-
-def to_uint8(image: np.ndarray) -> np.ndarray:
-    """An RGB image (H, W, 3) uint8/uint16 as uint8 (uint16 scaled by 255/65535)."""
-    if image.dtype == np.uint16:
-        return np.clip(np.rint(image * (255.0 / 65535.0)), 0, 255).astype(np.uint8)
-    return image
 
 
 def save_features(path: Path, features: Features, key, shape: tuple[int, int], **info) -> None:
