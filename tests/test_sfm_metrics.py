@@ -2,7 +2,8 @@
 
 import json
 
-from lburst.bench.reconstruction import method_slug, run_benchmark
+from lburst.bench.reconstruction import run_benchmark
+from lburst.methods import method_slug
 from lburst.sfm.metrics import aggregate, markdown_table, scene_metrics
 from lburst.sfm.reconstruct import ReconstructionResult
 

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -47,6 +46,7 @@ from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, r
 from lburst.bench.sequences import Sequence, list_sequences, read_sequence
 from lburst.features import Features
 from lburst.io import atomic_path
+from lburst.methods import method_slug
 from lburst.motion import BurstMotion, sample_motion
 from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
 from lburst.simulate import random_motion, simulate_burst, stable_seed
@@ -140,11 +140,6 @@ class MethodRunner:
                 merged = oracle_merge(burst, motion)
             return self.extractor(np.clip(np.round(merged), 0, 255).astype(np.uint8)[None])
         return self.extractor(burst)
-
-
-def _slug(spec: str) -> str:
-    readable = re.sub(r"[^A-Za-z0-9_.+-]+", "_", spec)[-60:]
-    return f"{readable}-{hashlib.sha1(spec.encode()).hexdigest()[:8]}"
 
 
 def burst_sha1(image: np.ndarray, burst: np.ndarray, motion: BurstMotion) -> str:
@@ -243,7 +238,7 @@ def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[
                 feats, times = [], []
                 for i, image in enumerate(seq.images):
                     burst, motion = protocol_burst(image, name, i, level)
-                    cache = out / "cache" / _slug(runner.key) / level.label / name / f"{i + 1}.npz"
+                    cache = out / "cache" / method_slug(runner.key) / level.label / name / f"{i + 1}.npz"
                     f, t = stored_features(runner, cache, paths[name] / str(i + 1), image, burst, motion)
                     feats.append(f)
                     times.append(t)

@@ -17,26 +17,18 @@ scenes) is printed as markdown and written to ``OUT/table.md`` and ``OUT/results
 
 from __future__ import annotations
 
-import hashlib
 import json
-import re
 import sys
 from pathlib import Path
 from typing import Any
 
 from lburst.io import atomic_path, file_sha1
+from lburst.methods import method_slug
 from lburst.methods.learned import results_key
 from lburst.sfm.scene import REFERENCE_FILE
 from lburst.store import files_sha1
 
 KEY_FILE = "bench_key.json"
-
-
-def method_slug(spec: str) -> str:
-    """A folder name for a method spec: its readable characters plus a short hash (specs may hold paths)."""
-    readable = re.sub(r"[^A-Za-z0-9+._=-]+", "_", spec.replace("../", "")).strip("_")[-40:]
-    return f"{readable}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}"
-
 
 REFERENCE_KEYS = ("reference_source", "reference_sha1", "precision", "precision_matches", "num_poses")
 

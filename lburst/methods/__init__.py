@@ -23,7 +23,9 @@ registered method too.  Examples: ``lburst``, ``lburst:weights.pt,frame_order=pu
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -120,6 +122,13 @@ def _split(head: str, spec: str) -> tuple[str, str | None, dict[str, str]]:
             raise ValueError(f"bad option {pair!r} in method spec {spec!r}: expected KEY=VALUE")
         options[key.strip()] = value.strip()
     return name.strip(), (arg or None), options
+
+
+def method_slug(spec: str) -> str:
+    """A file or folder name for a method spec: its readable characters plus a short hash of
+    the whole spec (specs may hold paths, and two specs never share a name)."""
+    readable = re.sub(r"[^A-Za-z0-9+._=-]+", "_", spec.replace("../", "")).strip("_")[-40:]
+    return f"{readable}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}"
 
 
 def parse_spec(spec: str) -> Spec:
