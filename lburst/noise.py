@@ -15,6 +15,9 @@ from typing import Callable, Protocol
 
 import numpy as np
 
+#: The network's input normalisation (RGB on 0..1): ImageNet's mean and std.  Kept here,
+#: free of torch, because ``gaussian-var:V`` noise is a variance in that normalised space.
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 
 

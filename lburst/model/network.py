@@ -34,8 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-IMAGENET_MEAN = (0.485, 0.456, 0.406)
-IMAGENET_STD = (0.229, 0.224, 0.225)
+from lburst.noise import IMAGENET_MEAN, IMAGENET_STD
 
 #: autocast dtype of each precision the network can run in (``None``: plain fp32)
 AUTOCAST_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
@@ -304,13 +303,22 @@ def replicate_frames(net: LBurstNet, frames: int) -> LBurstNet:
     return wide
 
 
-def save_checkpoint(net: LBurstNet, path: str | Path, meta: dict | None = None) -> None:
-    """Write ``net`` in the published layout (``{'net', 'state_dict'}``) plus ``meta``, atomically."""
+def checkpoint_dict(net: LBurstNet) -> dict:
+    """``{'net', 'state_dict'}``: ``net`` in the published checkpoint layout, on the CPU."""
+    return {"net": net.config.net_string(), "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()}}
+
+
+def write_checkpoint(checkpoint: dict, path: str | Path) -> None:
+    """``torch.save`` of ``checkpoint`` (weights, or a training state) to ``path``, atomically."""
     from lburst.io import atomic_path
 
-    state = {k: v.detach().cpu() for k, v in net.state_dict().items()}
-    ckpt = {"net": net.config.net_string(), "state_dict": state}
+    with atomic_path(path) as tmp:
+        torch.save(checkpoint, tmp)
+
+
+def save_checkpoint(net: LBurstNet, path: str | Path, meta: dict | None = None) -> None:
+    """Write ``net`` in the published layout (``{'net', 'state_dict'}``) plus ``meta``, atomically."""
+    ckpt = checkpoint_dict(net)
     if meta:
         ckpt["meta"] = meta
-    with atomic_path(path) as tmp:
-        torch.save(ckpt, tmp)
+    write_checkpoint(ckpt, path)

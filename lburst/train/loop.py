@@ -25,19 +25,20 @@ from tqdm import tqdm
 
 from lburst.io import atomic_path
 from lburst.model.network import (
-    IMAGENET_MEAN,
-    IMAGENET_STD,
     CheckpointError,
     LBurstNet,
     NetConfig,
     autocast_dtype,
     check_device,
     check_precision,
+    checkpoint_dict,
     load_checkpoint,
     replicate_frames,
     save_checkpoint,
     training_memory_format,
+    write_checkpoint,
 )
+from lburst.noise import IMAGENET_MEAN, IMAGENET_STD
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
 from lburst.train.losses import (
@@ -232,8 +233,7 @@ def _to_cpu(obj):
 
 def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds: float, generator) -> None:
     state = {
-        "net": net.config.net_string(),
-        "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()},
+        **checkpoint_dict(net),
         "optimizer": _to_cpu(optimizer.state_dict()),
         "step": step,
         "seconds": seconds,
@@ -241,8 +241,7 @@ def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds:
         "torch_rng": torch.get_rng_state(),
         "generator": generator.get_state(),
     }
-    with atomic_path(path) as tmp:
-        torch.save(state, tmp)
+    write_checkpoint(state, path)
 
 
 def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, resume: bool = False,

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from lburst.motion import BurstMotion
-from lburst.noise import LowLightNoise
+from lburst.noise import IMAGENET_STD, LowLightNoise
 
 
 @dataclass(frozen=True)
@@ -149,7 +149,7 @@ def _noise(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.
     else:
         if cfg.noise_variance is not None:
             variance = rng.uniform(*cfg.noise_variance)
-            std = np.sqrt(variance) * np.array([0.229, 0.224, 0.225]) * 255.0
+            std = np.sqrt(variance) * np.array(IMAGENET_STD) * 255.0
         else:
             std = np.full(3, rng.uniform(*cfg.noise_std))
         noisy = frames + rng.standard_normal(frames.shape, dtype=np.float32) * std.astype(np.float32)
