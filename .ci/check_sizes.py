@@ -25,19 +25,27 @@ def tracked_sizes(root: Path) -> dict[str, int]:
 
 
 def main() -> int:
-    root = Path(subprocess.run(["git", "rev-parse", "--show-toplevel"], capture_output=True, text=True,
-                               check=True).stdout.strip())
+    root = Path(
+        subprocess.run(
+            ["git", "rev-parse", "--show-toplevel"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+    )
     sizes = tracked_sizes(root)
-    errors = [f"{name}: {size / 1e6:.1f} MB (limit {MAX_FILE / 1e6:.0f} MB per file)"
-              for name, size in sorted(sizes.items()) if size > MAX_FILE]
+    errors = [
+        f"{name}: {size / 1e6:.1f} MB (limit {MAX_FILE / 1e6:.0f} MB per file)"
+        for name, size in sorted(sizes.items())
+        if size > MAX_FILE
+    ]
     training = sum(size for name, size in sizes.items() if name.startswith("training/"))
     if training > MAX_TRAINING:
         errors.append(f"training/: {training / 1e6:.1f} MB tracked (limit {MAX_TRAINING / 1e6:.0f} MB)")
     for error in errors:
         print(f"check_sizes: {error}", file=sys.stderr)
     if not errors:
-        print(f"check_sizes: {len(sizes)} tracked files, none above {MAX_FILE / 1e6:.0f} MB; "
-              f"training/ {training / 1e6:.1f} MB")
+        print(
+            f"check_sizes: {len(sizes)} tracked files, none above {MAX_FILE / 1e6:.0f} MB; "
+            f"training/ {training / 1e6:.1f} MB"
+        )
     return 1 if errors else 0
 
 

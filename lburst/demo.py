@@ -54,12 +54,21 @@ def method_labels(specs: list[str]) -> dict[str, str]:
 
     labels = {spec: _label(spec) for spec in specs}
     clashes = {lab for lab in labels.values() if list(labels.values()).count(lab) > 1}
-    return {spec: f"{lab}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}" if lab in clashes else lab
-            for spec, lab in labels.items()}
+    return {
+        spec: f"{lab}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}" if lab in clashes else lab
+        for spec, lab in labels.items()
+    }
 
 
-def plot_matches(image_a: np.ndarray, image_b: np.ndarray, kp_a: np.ndarray, kp_b: np.ndarray, path: Path,
-                 title: str, max_lines: int = 300) -> None:
+def plot_matches(
+    image_a: np.ndarray,
+    image_b: np.ndarray,
+    kp_a: np.ndarray,
+    kp_b: np.ndarray,
+    path: Path,
+    title: str,
+    max_lines: int = 300,
+) -> None:
     """Two images side by side with lines between matched keypoints (K, 2) each."""
     h = max(image_a.shape[0], image_b.shape[0])
     canvas = np.zeros((h, image_a.shape[1] + image_b.shape[1], 3), image_a.dtype)
@@ -95,8 +104,14 @@ def plot_trajectories(reference, results: dict, path: Path) -> None:
             continue
         est = np.array([-np.asarray(result.poses[n][0]).T @ np.asarray(result.poses[n][1]) for n in common])
         aligned = umeyama(est, np.array([centres[n] for n in common])).apply(est)
-        ax.plot(aligned[:, 0], aligned[:, 1], marker, ms=7, mfc="none",
-                label=f"{label}: {len(common)}/{len(names)} registered")
+        ax.plot(
+            aligned[:, 0],
+            aligned[:, 1],
+            marker,
+            ms=7,
+            mfc="none",
+            label=f"{label}: {len(common)}/{len(names)} registered",
+        )
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -107,8 +122,15 @@ def plot_trajectories(reference, results: dict, path: Path) -> None:
         fig.savefig(tmp, dpi=110, format="png")
 
 
-def run_demo(out: Path, methods: list[str], noise: str = "lowlight:moonless", bursts: int = 15, seed: int = 0,
-             overlap: int = 4, matcher: str = "mnn") -> None:
+def run_demo(
+    out: Path,
+    methods: list[str],
+    noise: str = "lowlight:moonless",
+    bursts: int = 15,
+    seed: int = 0,
+    overlap: int = 4,
+    matcher: str = "mnn",
+) -> None:
     """The night flight with ``bursts`` bursts of ``noise``, reconstructed with each of ``methods``
     (sequential pairs, ``overlap`` next bursts, the true intrinsics fixed), and the report in
     ``out`` (module docstring); prints progress and the table."""
@@ -130,8 +152,16 @@ def run_demo(out: Path, methods: list[str], noise: str = "lowlight:moonless", bu
         print(f"[2/3] reconstruct with {spec} ({i + 1}/{len(methods)})")
         # the drone's camera is calibrated: both methods get the true intrinsics, fixed, and
         # sequential pairs along the trajectory
-        result = reconstruct_scene(out / "scene", spec, out / label, camera="reference", fix_intrinsics=True,
-                                   pairs="sequential", overlap=overlap, matcher=matcher)
+        result = reconstruct_scene(
+            out / "scene",
+            spec,
+            out / label,
+            camera="reference",
+            fix_intrinsics=True,
+            pairs="sequential",
+            overlap=overlap,
+            matcher=matcher,
+        )
         results[label] = result
         rows.append({"method": label, "scene": "night flight", **result.metrics})
     print("[3/3] report")
@@ -149,7 +179,9 @@ def run_demo(out: Path, methods: list[str], noise: str = "lowlight:moonless", bu
         if isinstance(model, LBurst) and model.frames == len(burst):
             dense = model.dense(burst)
             maps = (dense["repeatability"], dense["reliability"])
-        plot_keypoints_and_maps(burst[len(burst) // 2], feats["keypoints"], *maps, kp_path, title=f"{label}, burst {show}")
+        plot_keypoints_and_maps(
+            burst[len(burst) // 2], feats["keypoints"], *maps, kp_path, title=f"{label}, burst {show}"
+        )
         pictures.append(kp_path.name)
         if data is not None and len(data[1]):
             keypoints, pairs, inliers = data
@@ -157,8 +189,14 @@ def run_demo(out: Path, methods: list[str], noise: str = "lowlight:moonless", bu
             a, b = pairs[q]
             frames = [load_burst(out / "scene" / result.names[j]) for j in (a, b)]
             m_path = out / f"matches_{label}.png"
-            plot_matches(frames[0][len(frames[0]) // 2], frames[1][len(frames[1]) // 2], keypoints[a][inliers[q][:, 0]],
-                         keypoints[b][inliers[q][:, 1]], m_path, f"{label}: {result.names[a]} - {result.names[b]}")
+            plot_matches(
+                frames[0][len(frames[0]) // 2],
+                frames[1][len(frames[1]) // 2],
+                keypoints[a][inliers[q][:, 0]],
+                keypoints[b][inliers[q][:, 1]],
+                m_path,
+                f"{label}: {result.names[a]} - {result.names[b]}",
+            )
             pictures.append(m_path.name)
     plot_trajectories(reference, results, out / "trajectory.png")
     pictures.append("trajectory.png")

@@ -30,6 +30,7 @@ class Extractor(Protocol):
 
     def __call__(self, burst: np.ndarray) -> Features: ...
 
+
 REQUIRED = ("keypoints", "scales", "scores", "descriptors")
 
 

@@ -125,8 +125,10 @@ def opencv_path(path: str | Path) -> str:
     try:
         text.encode("utf-8")
     except UnicodeEncodeError:
-        raise BurstError(f"{text.encode('utf-8', 'backslashreplace').decode()}: the name is not valid UTF-8, "
-                         f"which OpenCV cannot open; rename it") from None
+        raise BurstError(
+            f"{text.encode('utf-8', 'backslashreplace').decode()}: the name is not valid UTF-8, "
+            f"which OpenCV cannot open; rename it"
+        ) from None
     return text
 
 
@@ -190,7 +192,9 @@ def _read_video(path: Path, frames: slice | tuple[int, int] | None) -> list[np.n
     if not capture.isOpened():
         raise BurstError(f"{path}: not a readable video")
     count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
-    start, stop = (0, count) if frames is None else (frames.start or 0, frames.stop) if isinstance(frames, slice) else frames
+    start, stop = (
+        (0, count) if frames is None else (frames.start or 0, frames.stop) if isinstance(frames, slice) else frames
+    )
     stop = count if stop is None else stop
     if not 0 <= start < stop <= count:
         capture.release()
@@ -210,8 +214,10 @@ def _read_video(path: Path, frames: slice | tuple[int, int] | None) -> list[np.n
 def burst_files(path: str | Path) -> list[Path]:
     """The frame files of a burst folder, naturally sorted; error if there are none."""
     folder = Path(path)
-    files = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")),
-                   key=lambda p: natural_key(p.name))
+    files = sorted(
+        (p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")),
+        key=lambda p: natural_key(p.name),
+    )
     if not files:
         raise BurstError(f"{folder}: empty folder (no {', '.join(IMAGE_SUFFIXES)} frames)")
     return files
@@ -248,13 +254,17 @@ def load_burst(source: str | Path | Sequence[str | Path], frames: slice | tuple[
     first = images[0]
     for p, image in zip(paths, images):
         if image.shape != first.shape:
-            raise BurstError(f"{p}: size {image.shape[1]}x{image.shape[0]} differs from the first frame's "
-                             f"{first.shape[1]}x{first.shape[0]} ({paths[0]})")
+            raise BurstError(
+                f"{p}: size {image.shape[1]}x{image.shape[0]} differs from the first frame's "
+                f"{first.shape[1]}x{first.shape[0]} ({paths[0]})"
+            )
         if image.dtype != first.dtype:
             raise BurstError(f"{p}: {image.dtype} differs from the first frame's {first.dtype}")
     if len(images) % 2 == 0:
         where = paths[0].parent if len(set(paths)) > 1 else paths[0]
-        raise BurstError(f"{where}: {len(images)} frames; a burst needs an odd number (the middle one is the common frame)")
+        raise BurstError(
+            f"{where}: {len(images)} frames; a burst needs an odd number (the middle one is the common frame)"
+        )
     return np.stack(images)
 
 
@@ -300,8 +310,9 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def write_features_npz(path: str | Path, features: dict[str, np.ndarray], image_size: tuple[int, int],
-                       meta: dict | None = None) -> Path:
+def write_features_npz(
+    path: str | Path, features: dict[str, np.ndarray], image_size: tuple[int, int], meta: dict | None = None
+) -> Path:
     """``.npz`` with ``keypoints`` (K, 3) x, y, scale (pixel centres at integer coordinates),
     ``descriptors`` (K, D), ``scores`` (K,) and ``imsize`` (W, H), and ``meta`` as a JSON
     string ``_meta`` (see :mod:`lburst.store`); written atomically."""
@@ -313,8 +324,14 @@ def write_features_npz(path: str | Path, features: dict[str, np.ndarray], image_
     if meta is not None:
         extra["_meta"] = np.array(json.dumps(meta, ensure_ascii=True))
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        np.savez(f, keypoints=keypoints, descriptors=features["descriptors"], scores=features["scores"],
-                 imsize=np.array(image_size, np.int32), **extra)
+        np.savez(
+            f,
+            keypoints=keypoints,
+            descriptors=features["descriptors"],
+            scores=features["scores"],
+            imsize=np.array(image_size, np.int32),
+            **extra,
+        )
     return path
 
 
@@ -327,7 +344,9 @@ def read_features_npz(path: str | Path) -> dict[str, np.ndarray]:
     return out
 
 
-def write_features_h5(path: str | Path, name: str, features: dict[str, np.ndarray], image_size: tuple[int, int]) -> None:
+def write_features_h5(
+    path: str | Path, name: str, features: dict[str, np.ndarray], image_size: tuple[int, int]
+) -> None:
     """Add or replace group ``name`` in an hloc-style ``features.h5``: ``keypoints`` (K, 2)
     float32 (pixel centres at integer coordinates, as hloc; COLMAP adds 0.5),
     ``descriptors`` (D, K), ``scores`` (K,), ``image_size`` (W, H)."""

@@ -70,8 +70,10 @@ def create(spec: str = DEFAULT) -> Matcher:
     name, *pairs = spec.split(",")
     name = name.strip()
     if name not in _MATCHERS:
-        raise ValueError(f"unknown matcher {name!r}; available: "
-                         + "; ".join(f"{m.name} ({describe_options(m.options)})" for m in available()))
+        raise ValueError(
+            f"unknown matcher {name!r}; available: "
+            + "; ".join(f"{m.name} ({describe_options(m.options)})" for m in available())
+        )
     given = {}
     for pair in pairs:
         key, eq, value = pair.partition("=")
@@ -89,8 +91,7 @@ def _tensors(a: np.ndarray, b: np.ndarray, device: str):
 
     if a.dtype != b.dtype:
         raise ValueError(f"descriptor types differ: {a.dtype} vs {b.dtype}")
-    return (torch.from_numpy(np.ascontiguousarray(a)).to(device),
-            torch.from_numpy(np.ascontiguousarray(b)).to(device))
+    return (torch.from_numpy(np.ascontiguousarray(a)).to(device), torch.from_numpy(np.ascontiguousarray(b)).to(device))
 
 
 @dataclass(frozen=True)
@@ -109,8 +110,9 @@ class MutualNearestNeighbours:
     def __call__(self, a: Features, b: Features) -> np.ndarray:
         from lburst.match import mutual_nearest_neighbours
 
-        return mutual_nearest_neighbours(a["descriptors"], b["descriptors"], self.options.max_distance,
-                                         self.options.device)
+        return mutual_nearest_neighbours(
+            a["descriptors"], b["descriptors"], self.options.max_distance, self.options.device
+        )
 
 
 @register("mnn", MNNOptions)

@@ -76,7 +76,6 @@ class BurstMotion:
             pts -= k * self.field(size)
         return pts
 
-
     def frame_points(self, k: int, size: tuple[int, int], iterations: int = 4) -> np.ndarray:
         """The inverse of :meth:`source_points`: for every common-frame pixel ``x``, the
         position ``p`` in frame ``k`` that shows it (``S_k(p) = x``), (height, width, 2)
@@ -97,13 +96,23 @@ class BurstMotion:
         return p
 
 
-def sample_motion(rng: np.random.Generator, max_shift: float, max_rotation_deg: float = 0.0,
-                  max_zoom: float = 0.0, max_flow_px: float = 0.0) -> BurstMotion:
+def sample_motion(
+    rng: np.random.Generator,
+    max_shift: float,
+    max_rotation_deg: float = 0.0,
+    max_zoom: float = 0.0,
+    max_flow_px: float = 0.0,
+) -> BurstMotion:
     """A random :class:`BurstMotion`: shift uniform in ``[-max_shift, max_shift]^2``,
     rotation and zoom uniform in ``[-max, max]``, field std uniform in ``[0, max_flow_px]``."""
     shift = rng.uniform(-max_shift, max_shift, 2) if max_shift else np.zeros(2)
     rotation = rng.uniform(-max_rotation_deg, max_rotation_deg) if max_rotation_deg else 0.0
     zoom = rng.uniform(-max_zoom, max_zoom) if max_zoom else 0.0
     flow = rng.uniform(0, max_flow_px) if max_flow_px else 0.0
-    return BurstMotion((float(shift[0]), float(shift[1])), float(rotation), float(zoom), float(flow),
-                       int(rng.integers(2**31)) if flow else 0)
+    return BurstMotion(
+        (float(shift[0]), float(shift[1])),
+        float(rotation),
+        float(zoom),
+        float(flow),
+        int(rng.integers(2**31)) if flow else 0,
+    )

@@ -28,8 +28,10 @@ def folder_lock(folder: str | Path) -> Iterator[None]:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise FolderInUse(f"{folder}: in use by another lburst process (lock {folder / '.lock'}); "
-                              f"wait for it to finish or use another --out") from None
+            raise FolderInUse(
+                f"{folder}: in use by another lburst process (lock {folder / '.lock'}); "
+                f"wait for it to finish or use another --out"
+            ) from None
         yield
 
 

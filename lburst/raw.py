@@ -55,9 +55,15 @@ def read_dng(path: str | Path) -> np.ndarray:
         raise BurstError(f"{path}: {problem}")
     try:
         with rawpy.imread(str(path)) as raw:
-            return raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True,
-                                   adjust_maximum_thr=0.0, user_flip=0,
-                                   demosaic_algorithm=rawpy.DemosaicAlgorithm.AHD)
+            return raw.postprocess(
+                gamma=(1, 1),
+                no_auto_bright=True,
+                output_bps=16,
+                use_camera_wb=True,
+                adjust_maximum_thr=0.0,
+                user_flip=0,
+                demosaic_algorithm=rawpy.DemosaicAlgorithm.AHD,
+            )
     except BurstError:
         raise
     except (rawpy.LibRawError, OSError, ValueError) as err:
@@ -82,7 +88,9 @@ def dng_problem(path: Path) -> str | None:
                 photometric = int(page.tags[262].value) if 262 in page.tags else None
                 if photometric == 34892 or (photometric == 32803 and 33421 in page.tags and 33422 in page.tags):
                     return None
-            return "DNG without a CFA image: no PhotometricInterpretation 32803 with CFARepeatPatternDim/CFAPattern tags"
+            return (
+                "DNG without a CFA image: no PhotometricInterpretation 32803 with CFARepeatPatternDim/CFAPattern tags"
+            )
     except (tifffile.TiffFileError, OSError, ValueError, KeyError) as err:
         return f"not a readable DNG/TIFF ({err})"
 

@@ -48,8 +48,7 @@ def translate(image: np.ndarray, dx: float, dy: float, border: str = "reflect") 
         raise ValueError(f"unknown border {border!r}: use {', '.join(_BORDERS)}")
     h, w = image.shape[:2]
     matrix = np.array([[1, 0, dx], [0, 1, dy]], np.float64)
-    out = cv2.warpAffine(image.astype(np.float32), matrix, (w, h), flags=cv2.INTER_LINEAR,
-                         borderMode=_BORDERS[border])
+    out = cv2.warpAffine(image.astype(np.float32), matrix, (w, h), flags=cv2.INTER_LINEAR, borderMode=_BORDERS[border])
     return out.reshape(image.shape[:2] + image.shape[2:])
 
 
@@ -98,8 +97,14 @@ def simulate_burst(
     return burst
 
 
-def _simulate_general(image: np.ndarray, frames: int, motion: BurstMotion, noise: NoiseModel | None,
-                      generator: np.random.Generator, border: str) -> np.ndarray:
+def _simulate_general(
+    image: np.ndarray,
+    frames: int,
+    motion: BurstMotion,
+    noise: NoiseModel | None,
+    generator: np.random.Generator,
+    border: str,
+) -> np.ndarray:
     """:func:`simulate_burst` for a motion beyond a translation: frame k is one remap of
     ``image`` at ``motion.source_points(k)``."""
     if border not in _BORDERS:

@@ -77,9 +77,11 @@ class RecordingOptions:
     def signature(self) -> str:
         """What changes the bursts (for caches): burst, every, start, fps, normalisation."""
         n = self.normalisation
-        return (f"burst={self.burst},every={self.every},start={self.start},fps={self.fps},"
-                f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain},"
-                f"curve={n.curve},binning={n.binning}")
+        return (
+            f"burst={self.burst},every={self.every},start={self.start},fps={self.fps},"
+            f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain},"
+            f"curve={n.curve},binning={n.binning}"
+        )
 
 
 @dataclass(frozen=True)
@@ -121,8 +123,10 @@ def ground_truth_path(path: str | Path) -> Path:
 def frame_files(folder: Path) -> list[Path]:
     """The frame files of a recording folder (images and DNG), naturally sorted."""
     suffixes = IMAGE_SUFFIXES + RAW_SUFFIXES
-    return sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in suffixes
-                   and not p.name.startswith(".")), key=lambda p: natural_key(p.name))
+    return sorted(
+        (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in suffixes and not p.name.startswith(".")),
+        key=lambda p: natural_key(p.name),
+    )
 
 
 def is_recording(path: str | Path) -> bool:
@@ -130,8 +134,9 @@ def is_recording(path: str | Path) -> bool:
     path = Path(path)
     if path.suffix.lower() in VIDEO_SUFFIXES and not path.is_dir():
         return True
-    return path.is_dir() and ((path / "meta.json").is_file() or any(p.suffix.lower() in RAW_SUFFIXES
-                                                                    for p in path.iterdir()))
+    return path.is_dir() and (
+        (path / "meta.json").is_file() or any(p.suffix.lower() in RAW_SUFFIXES for p in path.iterdir())
+    )
 
 
 def read_frame(path: Path) -> np.ndarray:
@@ -187,8 +192,9 @@ class Recording:
             raise BurstError(f"{self.path}: not a readable video ({err}); truncated or not a video file?") from err
         if not container.streams.video:
             container.close()
-            raise BurstError(f"{self.path}: no video stream found (a truncated MP4 whose index was at the end, "
-                             "or not a video)")
+            raise BurstError(
+                f"{self.path}: no video stream found (a truncated MP4 whose index was at the end, or not a video)"
+            )
         return container
 
     def _probe_video(self) -> tuple[float, int | None]:
@@ -248,15 +254,17 @@ class Recording:
                     decoded += 1
                     yield Frame(index, stamp, frame.to_ndarray(format="rgb24"), str(self.path))
             except av.FFmpegError as err:
-                raise BurstError(f"{self.path}: decoding stopped after {decoded} frames ({err}); "
-                                 "the file is truncated or corrupt") from err
+                raise BurstError(
+                    f"{self.path}: decoding stopped after {decoded} frames ({err}); the file is truncated or corrupt"
+                ) from err
         finally:
             container.close()
         if decoded == 0:
             raise BurstError(f"{self.path}: no frames could be decoded (zero-length or truncated video)")
         if self.frame_count and decoded < self.frame_count and self.options.max_frames is None:
-            raise BurstError(f"{self.path}: only {decoded} of its {self.frame_count} frames could be decoded; "
-                             "the file is truncated")
+            raise BurstError(
+                f"{self.path}: only {decoded} of its {self.frame_count} frames could be decoded; the file is truncated"
+            )
 
     def bursts(self) -> Iterator[tuple[Keyframe, np.ndarray]]:
         """``(keyframe, burst (N, H, W, 3))`` in temporal order (module docstring); the burst is
@@ -270,8 +278,10 @@ class Recording:
             if first is None:
                 first = frame
             elif frame.image.shape != first.image.shape or frame.image.dtype != first.image.dtype:
-                raise BurstError(f"{frame.source}: frame {frame.index} is {_describe(frame.image)}, "
-                                 f"the first frame ({first.source}) {_describe(first.image)}; mixed frame sizes")
+                raise BurstError(
+                    f"{frame.source}: frame {frame.index} is {_describe(frame.image)}, "
+                    f"the first frame ({first.source}) {_describe(first.image)}; mixed frame sizes"
+                )
             while next_key + half < frame.index:
                 yield from self._emit(next_key, buffer)
                 next_key += o.every

@@ -46,8 +46,11 @@ def files_sha1(files: list[Path] | tuple[Path, ...], root: Path | None = None) -
 def content_sha1(path: str | Path) -> str:
     """SHA-1 over a burst's bytes: a file's, or a folder's non-hidden files (names and bytes, sorted)."""
     path = Path(path)
-    files = [path] if not path.is_dir() else sorted(
-        (p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")), key=lambda p: p.name)
+    files = (
+        [path]
+        if not path.is_dir()
+        else sorted((p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")), key=lambda p: p.name)
+    )
     return files_sha1(files)
 
 
@@ -61,8 +64,10 @@ def method_key(spec: str, **options: Any) -> dict[str, Any]:
 def burst_key(method: dict[str, Any], source: str | Path, content: str | None = None) -> dict[str, Any]:
     """The key of one burst's features: ``method`` (:func:`method_key`) on ``source``."""
     source = Path(source)
-    return {"method": method, "source": {"path": os.fsdecode(os.path.abspath(source)),
-                                         "sha1": content or content_sha1(source)}}
+    return {
+        "method": method,
+        "source": {"path": os.fsdecode(os.path.abspath(source)), "sha1": content or content_sha1(source)},
+    }
 
 
 def _canonical(value: Any) -> str:

@@ -46,7 +46,9 @@ def plot_keypoints_and_maps(
             ax.imshow(to_display(image))
             kp = keypoints[:max_keypoints]
             ax.scatter(kp[:, 0], kp[:, 1], s=4, c="lime", edgecolors="none")
-            ax.set_title(f"{len(keypoints)} keypoints" + (f" (best {len(kp)} shown)" if len(kp) < len(keypoints) else ""))
+            ax.set_title(
+                f"{len(keypoints)} keypoints" + (f" (best {len(kp)} shown)" if len(kp) < len(keypoints) else "")
+            )
         else:
             im = ax.imshow(data, cmap="RdYlGn", vmin=0, vmax=1)
             ax.set_title(name)

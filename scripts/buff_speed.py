@@ -27,8 +27,9 @@ from lburst.io import atomic_path
 from lburst.methods.buff import Buff, BuffConfig
 
 
-def synthetic_burst(width: int = 1024, height: int = 768, frames: int = 5, velocity=(1.3, -0.6),
-                    noise: float = 25.0, seed: int = 0) -> np.ndarray:
+def synthetic_burst(
+    width: int = 1024, height: int = 768, frames: int = 5, velocity=(1.3, -0.6), noise: float = 25.0, seed: int = 0
+) -> np.ndarray:
     """uint8 ``(frames, height, width, 3)``: a photo translated by ``t * velocity`` plus Gaussian noise."""
     from skimage import data
 
@@ -73,13 +74,21 @@ def main(argv: list[str] | None = None) -> int:
     slopes = features["slopes"]
     accuracy = float(np.mean(np.linalg.norm(slopes - np.array([1.3, -0.6]), axis=1) < 0.25)) if len(slopes) else 0.0
     result = {
-        "burst": list(burst.shape), "slopes": len(extractor.slopes), "threads": args.threads, "runs": args.runs,
-        "seconds_median": statistics.median(seconds), "seconds": seconds, "keypoints": counts[-1],
-        "slope_within_0.25": accuracy, "machine": platform.processor() or platform.machine(),
+        "burst": list(burst.shape),
+        "slopes": len(extractor.slopes),
+        "threads": args.threads,
+        "runs": args.runs,
+        "seconds_median": statistics.median(seconds),
+        "seconds": seconds,
+        "keypoints": counts[-1],
+        "slope_within_0.25": accuracy,
+        "machine": platform.processor() or platform.machine(),
     }
     print(f"{'burst':>18} {'slopes':>6} {'threads':>7} {'median s':>9} {'min s':>7} {'keypoints':>9} {'slope ok':>8}")
-    print(f"{'x'.join(map(str, burst.shape)):>18} {result['slopes']:>6} {args.threads:>7} "
-          f"{result['seconds_median']:>9.2f} {min(seconds):>7.2f} {result['keypoints']:>9} {accuracy:>8.3f}")
+    print(
+        f"{'x'.join(map(str, burst.shape)):>18} {result['slopes']:>6} {args.threads:>7} "
+        f"{result['seconds_median']:>9.2f} {min(seconds):>7.2f} {result['keypoints']:>9} {accuracy:>8.3f}"
+    )
     if args.profile:
         profiler = cProfile.Profile()
         profiler.runcall(extractor, burst)

@@ -58,11 +58,15 @@ def main() -> int:
         print(f"| {row['steps']} | " + " | ".join(cells) + " |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"runs": dict(zip(labels, map(str, args.runs))), "window": args.window,
-                                        "rows": rows}, indent=1))
+        args.out.write_text(
+            json.dumps({"runs": dict(zip(labels, map(str, args.runs))), "window": args.window, "rows": rows}, indent=1)
+        )
     if args.plot:
-        plot_curves({label: run / "log.csv" for label, run in zip(labels, args.runs)}, args.plot,
-                    smooth=max(1, args.window // 2))
+        plot_curves(
+            {label: run / "log.csv" for label, run in zip(labels, args.runs)},
+            args.plot,
+            smooth=max(1, args.window // 2),
+        )
     return 0
 
 

@@ -80,8 +80,15 @@ def run_child(path: str, args: argparse.Namespace) -> dict:
         agreement = float((dist <= 1).mean()) if len(dist) else None
     else:
         agreement = None
-    result = {"path": path, "median_s": statistics.median(times), "times_s": times, "keypoints": count,
-              "peak_rss_mb": rss1 / 1024, "extra_rss_mb": (rss1 - rss0) / 1024, "agreement_1px": agreement}
+    result = {
+        "path": path,
+        "median_s": statistics.median(times),
+        "times_s": times,
+        "keypoints": count,
+        "peak_rss_mb": rss1 / 1024,
+        "extra_rss_mb": (rss1 - rss0) / 1024,
+        "agreement_1px": agreement,
+    }
     if device.startswith("cuda"):
         result["peak_cuda_mb"] = torch.cuda.max_memory_allocated() / 2**20
     return result
@@ -100,7 +107,9 @@ def _cpu_name() -> str:
 def _cpu_flags() -> str:
     """The CPU's bf16 instructions (AMX or AVX512-BF16), which decide whether bf16 pays."""
     try:
-        flags = next(line for line in Path("/proc/cpuinfo").read_text().splitlines() if line.startswith("flags")).split()
+        flags = next(
+            line for line in Path("/proc/cpuinfo").read_text().splitlines() if line.startswith("flags")
+        ).split()
     except (OSError, StopIteration):
         return "unknown"
     found = [f for f in ("amx_bf16", "avx512_bf16") if f in flags]
@@ -150,8 +159,10 @@ def main() -> int:
     base = next((r["median_s"] for r in results if r["path"] == "plain"), None)
     device = torch.cuda.get_device_name() if args.device.startswith("cuda") else _cpu_name()
     flags = _cpu_flags()
-    print(f"\n5-frame burst {args.width}x{args.height}, {args.device} ({device}; native bf16: {flags}), "
-          f"{args.threads} threads, median of {args.repeats}\n")
+    print(
+        f"\n5-frame burst {args.width}x{args.height}, {args.device} ({device}; native bf16: {flags}), "
+        f"{args.threads} threads, median of {args.repeats}\n"
+    )
     print("| path | s / burst | speed-up vs plain | keypoints | within 1 px of fp32 | peak RSS MB |")
     print("|---|---|---|---|---|---|")
     for r in results:
@@ -160,8 +171,18 @@ def main() -> int:
         print(f"| {r['path']} | {r['median_s']:.2f} | {ratio} | {r['keypoints']} | {agree} | {r['peak_rss_mb']:.0f} |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"device": device, "bf16_hardware": flags, "threads": args.threads, "size": [args.width, args.height],
-                                        "results": results}, indent=2))
+        args.out.write_text(
+            json.dumps(
+                {
+                    "device": device,
+                    "bf16_hardware": flags,
+                    "threads": args.threads,
+                    "size": [args.width, args.height],
+                    "results": results,
+                },
+                indent=2,
+            )
+        )
     return 0
 
 

@@ -54,20 +54,30 @@ def run_checkpoints(run: Path) -> list[tuple[int, Path]]:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("runs", nargs="*", type=Path, help="training run folders (snapshots/, last.pt)")
-    p.add_argument("--data", type=Path, default=None, help="homography sequences (default: $LBURST_SHARED/data/homography)")
+    p.add_argument(
+        "--data", type=Path, default=None, help="homography sequences (default: $LBURST_SHARED/data/homography)"
+    )
     p.add_argument("--sigma", type=float, nargs="+", default=[50, 100])
     p.add_argument("--reference", help="method spec to measure the gap to (default: the published RoBLo_N16_B5)")
     p.add_argument("--steps", type=int, nargs="*", help="only the runs' checkpoints at these steps")
-    p.add_argument("--wrap", default="", metavar="WRAPPER+",
-                   help="wrapper spec put before each run's checkpoint, e.g. 'align+' for a run trained on aligned bursts")
+    p.add_argument(
+        "--wrap",
+        default="",
+        metavar="WRAPPER+",
+        help="wrapper spec put before each run's checkpoint, e.g. 'align+' for a run trained on aligned bursts",
+    )
     p.add_argument("--also", nargs="*", default=[], help="more method specs, as rows (e.g. lburst r2d2 sift)")
     p.add_argument("--out", type=Path, default=Path("outputs/gap_vs_steps"))
     args = p.parse_args()
     data = args.data or shared_dir() / "data" / "homography"
     reference = args.reference or f"lburst:{shared_dir() / 'anchors' / 'RoBLo_N16_B5.pt'},frame_order=published"
     try:
-        rows = [(run.name, step, f"{args.wrap}lburst:{path}") for run in args.runs for step, path in run_checkpoints(run)
-                if not args.steps or step in args.steps]
+        rows = [
+            (run.name, step, f"{args.wrap}lburst:{path}")
+            for run in args.runs
+            for step, path in run_checkpoints(run)
+            if not args.steps or step in args.steps
+        ]
         for spec in args.also:
             path = weights_file(spec)
             rows.append((spec, checkpoint_step(path) if path else None, spec))
@@ -96,8 +106,9 @@ def main() -> int:
         cells = " | ".join(f"{row[lv]['mma3']:.3f} | {row[lv]['mma1']:.3f} | {row[lv]['gap3']:+.3f}" for lv in levels)
         print(f"| {row['label']} | {'-' if row['step'] is None else row['step']} | {cells} |")
     with atomic_path(args.out / "gap_vs_steps.json") as tmp:
-        tmp.write_text(json.dumps({"data": str(data), "sigmas": args.sigma, "reference": reference, "rows": table},
-                                  indent=1))
+        tmp.write_text(
+            json.dumps({"data": str(data), "sigmas": args.sigma, "reference": reference, "rows": table}, indent=1)
+        )
     print(f"\nresults: {args.out / 'gap_vs_steps.json'}")
     return 0
 

@@ -43,8 +43,9 @@ def main() -> None:
             for j in tqdm(range(n), desc=args.out.name, unit="frame", mininterval=10):
                 x = int(abs((j * 4) % (2 * span) - span))  # back and forth, 4 px per frame
                 y = int((height / 2) * (1 + np.sin(j / 500)) / 2)
-                frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(texture[y:y + height, x:x + width]),
-                                                   format="rgb24")
+                frame = av.VideoFrame.from_ndarray(
+                    np.ascontiguousarray(texture[y : y + height, x : x + width]), format="rgb24"
+                )
                 frame.pts = j
                 for packet in stream.encode(frame):
                     container.mux(packet)

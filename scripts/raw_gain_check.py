@@ -53,8 +53,10 @@ def main() -> None:
     white = sensor.photons * sensor.quantum_efficiency / sensor.gain_e_per_adu / (2**sensor.adc_bits - 1 - BLACK_LEVEL)
     single = float(np.percentile(np.asarray(first, np.float32) / 65535 @ LUMA, 99.5))
     auto = Normalisation().estimate_gain(first)
-    print(f"99.5th luminance percentile: single pixels {single / white:.2f} x white, "
-          f"binned burst mean {0.8 / auto / white:.2f} x white")
+    print(
+        f"99.5th luminance percentile: single pixels {single / white:.2f} x white, "
+        f"binned burst mean {0.8 / auto / white:.2f} x white"
+    )
     variants: dict[str, tuple[float | None, str] | None] = {
         "none (linear uint16)": (None, "linear"),
         "srgb, gain 0.8/P(pixels)": (0.8 / single, "srgb"),
@@ -79,12 +81,25 @@ def main() -> None:
         counts = []
         for a, b in PAIRS:
             m = match(feats[a], feats[b])
-            d = epipolar_distances(feats[a]["keypoints"][m[:, 0]] + 0.5, feats[b]["keypoints"][m[:, 1]] + 0.5,
-                                   cam, cam, camera_pose(cfg, a / fps), camera_pose(cfg, b / fps)) if len(m) else []
+            d = (
+                epipolar_distances(
+                    feats[a]["keypoints"][m[:, 0]] + 0.5,
+                    feats[b]["keypoints"][m[:, 1]] + 0.5,
+                    cam,
+                    cam,
+                    camera_pose(cfg, a / fps),
+                    camera_pose(cfg, b / fps),
+                )
+                if len(m)
+                else []
+            )
             counts.append(f"{len(m)}/{int(np.sum(np.asarray(d) <= 4))}")
         kp = np.mean([len(f["keypoints"]) for f in feats.values()])
-        print(f"{name:45s} mean {img.mean():5.1f} p50 {np.percentile(img, 50):3.0f} p99 {np.percentile(img, 99):3.0f}"
-              f" | keypoints {kp:5.0f} | matches/correct {' '.join(counts)}", flush=True)
+        print(
+            f"{name:45s} mean {img.mean():5.1f} p50 {np.percentile(img, 50):3.0f} p99 {np.percentile(img, 99):3.0f}"
+            f" | keypoints {kp:5.0f} | matches/correct {' '.join(counts)}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

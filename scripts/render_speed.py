@@ -101,7 +101,9 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['size']:>9} {r['supersample']:>2} {r['frames']:>6} {r['city_s']:>7.2f} {r['cast_s']:>7.3f} "
             f"{r['shade_s']:>7.3f} {r['frame_s']:>7.3f} {r['scene_s']:>8.1f} {r['overlap_min']:>5.2f}/{r['overlap_mean']:.2f}"
         )
-    print("scene s: make_night_flight end to end (city, frames, PNG, reference); overlap: min/mean of consecutive common frames")
+    print(
+        "scene s: make_night_flight end to end (city, frames, PNG, reference); overlap: min/mean of consecutive common frames"
+    )
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         result = {"machine": platform.platform(), "python": sys.version.split()[0], "rows": rows}

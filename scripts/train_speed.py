@@ -20,8 +20,15 @@ import numpy as np
 import torch
 
 
-def measure(frames: int, batch: int, crop: int, steps: int, device: str, precision: str = "fp32",
-            memory_format: str = "channels_last") -> dict:
+def measure(
+    frames: int,
+    batch: int,
+    crop: int,
+    steps: int,
+    device: str,
+    precision: str = "fp32",
+    memory_format: str = "channels_last",
+) -> dict:
     import skimage.data
 
     from lburst.model.network import LBurstNet, NetConfig, training_memory_format
@@ -58,9 +65,18 @@ def measure(frames: int, batch: int, crop: int, steps: int, device: str, precisi
         if i:
             times.append(time.perf_counter() - t)
     step_s = statistics.median(times)
-    return {"frames": frames, "batch": batch, "crop": crop, "device": device, "precision": precision,
-            "memory_format": memory_format, "step_s": step_s,
-            "steps_per_s": 1 / step_s, "pairs_per_s": batch / step_s, "pair_s": pair_s}
+    return {
+        "frames": frames,
+        "batch": batch,
+        "crop": crop,
+        "device": device,
+        "precision": precision,
+        "memory_format": memory_format,
+        "step_s": step_s,
+        "steps_per_s": 1 / step_s,
+        "pairs_per_s": batch / step_s,
+        "pair_s": pair_s,
+    }
 
 
 def main() -> int:
@@ -71,21 +87,39 @@ def main() -> int:
     p.add_argument("--steps", type=int, default=3)
     from lburst.model.network import AUTOCAST_DTYPES
 
-    p.add_argument("--precision", nargs="+", default=["fp32"], choices=list(AUTOCAST_DTYPES),
-                   help="autocast of the forward pass (each is measured)")
-    p.add_argument("--memory-format", nargs="+", default=["channels_last", "contiguous"],
-                   choices=("channels_last", "contiguous"), help="tensor layouts (each is measured)")
+    p.add_argument(
+        "--precision",
+        nargs="+",
+        default=["fp32"],
+        choices=list(AUTOCAST_DTYPES),
+        help="autocast of the forward pass (each is measured)",
+    )
+    p.add_argument(
+        "--memory-format",
+        nargs="+",
+        default=["channels_last", "contiguous"],
+        choices=("channels_last", "contiguous"),
+        help="tensor layouts (each is measured)",
+    )
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--out", type=Path)
     args = p.parse_args()
-    rows = [measure(n, args.batch, args.crop, args.steps, args.device, prec, layout)
-            for n in args.frames for prec in args.precision for layout in args.memory_format]
-    print(f"\ntraining step, batch {args.batch} pairs of {args.crop} px crops, {args.device}, "
-          f"{torch.get_num_threads()} threads, median of {args.steps}\n")
+    rows = [
+        measure(n, args.batch, args.crop, args.steps, args.device, prec, layout)
+        for n in args.frames
+        for prec in args.precision
+        for layout in args.memory_format
+    ]
+    print(
+        f"\ntraining step, batch {args.batch} pairs of {args.crop} px crops, {args.device}, "
+        f"{torch.get_num_threads()} threads, median of {args.steps}\n"
+    )
     print("| frames | precision | memory format | s / step | steps / s | pairs / s | s / pair generated (1 worker) |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['frames']} | {r['precision']} | {r['memory_format']} | {r['step_s']:.2f} | {r['steps_per_s']:.3f} | {r['pairs_per_s']:.2f} | {r['pair_s']:.3f} |")
+        print(
+            f"| {r['frames']} | {r['precision']} | {r['memory_format']} | {r['step_s']:.2f} | {r['steps_per_s']:.3f} | {r['pairs_per_s']:.2f} | {r['pair_s']:.3f} |"
+        )
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(rows, indent=2))

@@ -34,7 +34,9 @@ def test_both_layouts_and_resizing_keep_geometry(tmp_path, layout):
     # a point maps consistently: resize then H' equals H then resize
     p = np.array([[37.0, 81.0]])
     s = resize_matrix(100 / 200, 80 / 160)
-    np.testing.assert_allclose(project(small.homographies[2], project(s, p)), project(s, project(seq.homographies[2], p)))
+    np.testing.assert_allclose(
+        project(small.homographies[2], project(s, p)), project(s, project(seq.homographies[2], p))
+    )
 
 
 def test_bad_sequence_files_are_named(tmp_path):
@@ -103,8 +105,12 @@ def test_weights_retrained_at_the_same_path_are_not_served_cached_results(tmp_pa
 
     _write_sequence(tmp_path / "data" / "seq", size=(96, 128))
     ckpt = tmp_path / "model.pt"
-    run = lambda: run_homography_benchmark(tmp_path / "data", [f"r2d2:{ckpt}"], [0], tmp_path / "out",  # noqa: E731
-                                           progress=False)["methods"][f"r2d2:{ckpt}"]["sigma0"]["pairs"]
+
+    def run():
+        return run_homography_benchmark(tmp_path / "data", [f"r2d2:{ckpt}"], [0], tmp_path / "out", progress=False)[
+            "methods"
+        ][f"r2d2:{ckpt}"]["sigma0"]["pairs"]
+
     shutil.copy(weights_path("lburst-b1"), ckpt)
     first = run()
     assert run() == first  # same weights: read from the cache
@@ -117,8 +123,12 @@ def test_weights_retrained_at_the_same_path_are_not_served_cached_results(tmp_pa
 
 def test_a_sequence_image_replaced_under_the_same_name_is_run_again(tmp_path):
     _write_sequence(tmp_path / "data" / "seq", size=(96, 128))
-    run = lambda out: run_homography_benchmark(tmp_path / "data", ["sift"], [25], tmp_path / out,  # noqa: E731
-                                               progress=False)["methods"]["sift"]["sigma25"]["pairs"]["seq"]
+
+    def run(out):
+        return run_homography_benchmark(tmp_path / "data", ["sift"], [25], tmp_path / out, progress=False)["methods"][
+            "sift"
+        ]["sigma25"]["pairs"]["seq"]
+
     first = run("out")
     image = tmp_path / "data" / "seq" / "img3.png"
     cv2.imwrite(str(image), cv2.flip(cv2.imread(str(image)), -1))  # another picture, the same name

@@ -45,12 +45,31 @@ def test_every_option_of_every_command_has_help_and_shows_its_default():
         assert not lacking, (words, lacking)
         text = sub.format_help()
         assert "(default: None)" not in text and "(default: False)" not in text
-    assert "(default: 4000)" in build_parser(("extract",))._subparsers._group_actions[0].choices["extract"].format_help()
+    assert (
+        "(default: 4000)" in build_parser(("extract",))._subparsers._group_actions[0].choices["extract"].format_help()
+    )
 
 
 def test_simulate_flight_takes_out_as_an_option(tmp_path):
-    assert main(["simulate", "flight", "--out", str(tmp_path / "scene"), "--bursts", "2", "--frames", "1",
-                 "--size", "64x48", "--supersample", "1"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "flight",
+                "--out",
+                str(tmp_path / "scene"),
+                "--bursts",
+                "2",
+                "--frames",
+                "1",
+                "--size",
+                "64x48",
+                "--supersample",
+                "1",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "scene" / "reference.json").is_file()
 
 

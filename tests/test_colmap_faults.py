@@ -36,8 +36,10 @@ def _alive(pid):
 
 def test_an_abort_shows_its_check_failed_line_not_stack_frames():
     assert failure_summary(GLOG_ABORT) == "Check failed: params_.size() == NumParams() (2 vs. 4)"
-    assert failure_summary("a\nTraceback (most recent call last):\n  x\nFileNotFoundError: job.json\n") == \
-        "FileNotFoundError: job.json"
+    assert (
+        failure_summary("a\nTraceback (most recent call last):\n  x\nFileNotFoundError: job.json\n")
+        == "FileNotFoundError: job.json"
+    )
 
 
 def test_a_failed_child_names_its_error(tmp_path):
@@ -49,11 +51,15 @@ def test_a_failed_child_names_its_error(tmp_path):
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_the_child_dies_with_its_parent(sig):
     """The parent starts a child as run_job_subprocess does (``--parent``); killing the parent kills it."""
-    child = ("import os, sys, time; from lburst.process import die_with_parent; "
-             "die_with_parent(int(sys.argv[1])); time.sleep(120)")
-    parent = ("import os, subprocess, sys, time; "
-              f"c = subprocess.Popen([sys.executable, '-c', {child!r}, str(os.getpid())]); "
-              "print(c.pid, flush=True); time.sleep(120)")
+    child = (
+        "import os, sys, time; from lburst.process import die_with_parent; "
+        "die_with_parent(int(sys.argv[1])); time.sleep(120)"
+    )
+    parent = (
+        "import os, subprocess, sys, time; "
+        f"c = subprocess.Popen([sys.executable, '-c', {child!r}, str(os.getpid())]); "
+        "print(c.pid, flush=True); time.sleep(120)"
+    )
     proc = subprocess.Popen([sys.executable, "-c", parent], stdout=subprocess.PIPE, text=True)
     pid = int(proc.stdout.readline())
     time.sleep(1.0)  # the child has called prctl
@@ -69,9 +75,17 @@ def test_the_child_dies_with_its_parent(sig):
 
 
 def test_one_process_at_a_time_holds_a_job_folder(tmp_path):
-    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from lburst.process import folder_lock\n"
-                               "with folder_lock(sys.argv[1]):\n print('held', flush=True); time.sleep(120)",
-                               str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time; from lburst.process import folder_lock\n"
+            "with folder_lock(sys.argv[1]):\n print('held', flush=True); time.sleep(120)",
+            str(tmp_path),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     assert holder.stdout.readline().strip() == "held"
     with pytest.raises(FolderInUse, match="in use by another lburst process"):
         with folder_lock(tmp_path):
@@ -86,10 +100,12 @@ def test_one_process_at_a_time_holds_a_job_folder(tmp_path):
 
 def test_camera_parameter_counts_are_checked():
     check_camera({"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 50.0, 32.0, 24.0]})
-    for camera, problem in [({"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 32.0]}, "takes 4"),
-                            ({"model": "NOPE", "width": 64, "height": 48, "params": [1.0]}, "unknown camera"),
-                            ({"model": "PINHOLE", "width": 0, "height": 48, "params": [1.0] * 4}, "positive"),
-                            ({"model": "PINHOLE", "width": 64, "height": 48}, "lacks")]:
+    for camera, problem in [
+        ({"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 32.0]}, "takes 4"),
+        ({"model": "NOPE", "width": 64, "height": 48, "params": [1.0]}, "unknown camera"),
+        ({"model": "PINHOLE", "width": 0, "height": 48, "params": [1.0] * 4}, "positive"),
+        ({"model": "PINHOLE", "width": 64, "height": 48}, "lacks"),
+    ]:
         with pytest.raises(ValueError, match=problem):
             check_camera(camera)
 
@@ -101,8 +117,11 @@ def test_a_bad_reference_json_fails_before_colmap_runs(tmp_path):
     for i in range(3):
         cv2.imwrite(str(scene / f"{i}.png"), rng.integers(0, 255, (48, 64, 3), dtype=np.uint8))
     pose = {"R": np.eye(3).tolist(), "t": [0.0, 0.0, 0.0]}
-    reference = {"source": "test", "camera": {"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 32.0]},
-                 "images": {str(i): pose for i in range(3)}}
+    reference = {
+        "source": "test",
+        "camera": {"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 32.0]},
+        "images": {str(i): pose for i in range(3)},
+    }
     (scene / "reference.json").write_text(json.dumps(reference))
     with pytest.raises(ReconstructionError, match=r"reference.json.*PINHOLE takes 4 params, got 2|reference.json"):
         reconstruct_scene(scene, "sift", out, camera="reference", progress=False)

@@ -4,8 +4,14 @@ from lburst.demo import method_labels
 
 
 def test_two_lburst_checkpoints_get_their_own_labels():
-    specs = ["lburst", "lburst:../shared/anchors/RoBLo_N16_B5.pt,frame_order=published", "merge+r2d2",
-             "lburst:runs/a/last.pt", "lburst:runs/b/last.pt", "sift"]
+    specs = [
+        "lburst",
+        "lburst:../shared/anchors/RoBLo_N16_B5.pt,frame_order=published",
+        "merge+r2d2",
+        "lburst:runs/a/last.pt",
+        "lburst:runs/b/last.pt",
+        "sift",
+    ]
     labels = method_labels(specs)
     assert len(set(labels.values())) == len(specs)
     assert labels["lburst"] == "lburst"

@@ -44,7 +44,7 @@ def test_extract_in_bf16_finds_nearly_the_fp32_keypoints(tmp_path):
 
 def _small_burst(folder, seed=0, n=3):
     """A 3-frame burst of a 160x120 crop of a photo (``seed`` moves the crop)."""
-    crop = skimage.data.astronaut()[40 * seed : 40 * seed + 240, 100 : 420]
+    crop = skimage.data.astronaut()[40 * seed : 40 * seed + 240, 100:420]
     image = cv2.resize(crop, (160, 120), interpolation=cv2.INTER_AREA)
     save_burst(np.stack([image] * n), folder)
     return folder
@@ -102,6 +102,7 @@ def test_features_h5_is_written_when_no_burst_finished(tmp_path, capsys):
     with h5py.File(out / "features.h5") as f:
         assert list(f) == []
     assert [p.name for p in out.iterdir()] == ["features.h5"]  # no temporary left
+
 
 def test_extract_dot_names_the_output_after_the_folder(tmp_path, monkeypatch):
     burst = _small_burst(tmp_path / "here")

@@ -38,9 +38,11 @@ def test_lazy_module_imports_on_first_use():
 
 
 def test_reconstruction_without_pycolmap_says_what_to_install():
-    code = ("from lburst.sfm.colmap import default_camera, exif_camera\n"
-            "print(default_camera(640, 480)['model'])\n"
-            "exif_camera('x.jpg')\n")
+    code = (
+        "from lburst.sfm.colmap import default_camera, exif_camera\n"
+        "print(default_camera(640, 480)['model'])\n"
+        "exif_camera('x.jpg')\n"
+    )
     out = run_python(code, block=("pycolmap",))
     assert out.returncode != 0
     assert out.stdout.strip() == "SIMPLE_RADIAL"  # what needs no COLMAP still works
@@ -48,18 +50,22 @@ def test_reconstruction_without_pycolmap_says_what_to_install():
 
 
 def test_extraction_and_the_registry_work_without_the_extras():
-    code = ("import numpy as np, lburst\n"
-            "burst = np.random.default_rng(0).integers(0, 255, (3, 64, 80, 3), dtype=np.uint8)\n"
-            "print(len(lburst.methods.available()) > 3, lburst.methods.create('sift')(burst)['descriptors'].shape[1])\n")
+    code = (
+        "import numpy as np, lburst\n"
+        "burst = np.random.default_rng(0).integers(0, 255, (3, 64, 80, 3), dtype=np.uint8)\n"
+        "print(len(lburst.methods.available()) > 3, lburst.methods.create('sift')(burst)['descriptors'].shape[1])\n"
+    )
     out = run_python(code, block=("pycolmap", "skimage", "matplotlib", "onnx", "onnxruntime", "onnxscript"))
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["True", "128"]
 
 
 def test_merge_without_scikit_image_says_what_to_install():
-    code = ("import numpy as np, lburst\n"
-            "burst = np.zeros((3, 32, 32, 3), np.uint8)\n"
-            "lburst.methods.create('merge+sift')(burst)\n")
+    code = (
+        "import numpy as np, lburst\n"
+        "burst = np.zeros((3, 32, 32, 3), np.uint8)\n"
+        "lburst.methods.create('merge+sift')(burst)\n"
+    )
     out = run_python(code, block=("skimage",))
     assert out.returncode != 0
     assert "pip install 'lburst[sfm]'" in out.stderr.strip().splitlines()[-1]
@@ -70,19 +76,22 @@ def test_cli_prints_one_line_for_a_missing_extra(tmp_path):
     code = f"from lburst.cli import main\nraise SystemExit(main(['simulate', 'burst', '--out', {out_dir!r}]))\n"
     out = run_python(code, block=("skimage",))
     assert out.returncode == 2
-    assert out.stderr.strip() == ("lburst: the default photo (give IMAGE instead) needs scikit-image: "
-                                  "pip install 'lburst[sfm]'")
+    assert out.stderr.strip() == (
+        "lburst: the default photo (give IMAGE instead) needs scikit-image: pip install 'lburst[sfm]'"
+    )
 
 
 def test_plotting_chooses_no_backend(tmp_path):
     png = str(tmp_path / "k.png")
-    code = ("import numpy as np\n"
-            "import lburst.viz, lburst.demo\n"
-            "assert 'matplotlib' not in sys.modules\n"
-            "img = np.zeros((40, 60, 3), np.uint8)\n"
-            f"lburst.viz.plot_keypoints_and_maps(img, np.array([[5.0, 6.0]]), np.zeros((40, 60)), None, {png!r})\n"
-            "assert 'matplotlib.pyplot' not in sys.modules\n"
-            "print('ok')\n")
+    code = (
+        "import numpy as np\n"
+        "import lburst.viz, lburst.demo\n"
+        "assert 'matplotlib' not in sys.modules\n"
+        "img = np.zeros((40, 60, 3), np.uint8)\n"
+        f"lburst.viz.plot_keypoints_and_maps(img, np.array([[5.0, 6.0]]), np.zeros((40, 60)), None, {png!r})\n"
+        "assert 'matplotlib.pyplot' not in sys.modules\n"
+        "print('ok')\n"
+    )
     out = run_python(code)
     assert out.returncode == 0, out.stderr
     assert (tmp_path / "k.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

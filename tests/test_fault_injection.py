@@ -73,8 +73,9 @@ def _run(args: list[str], kill_after: float | None = None) -> int:
     """Run ``lburst ARGS`` in a session of its own; with ``kill_after``, SIGKILL it that many
     seconds after it starts its work (its first progress line on stderr, once the imports and
     the method are loaded).  Returns its exit status."""
-    proc = subprocess.Popen([*LBURST, *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            env=_environment(), start_new_session=True)
+    proc = subprocess.Popen(
+        [*LBURST, *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=_environment(), start_new_session=True
+    )
     err: list[bytes] = []
     reader = threading.Thread(target=lambda: err.extend(iter(lambda: proc.stderr.read1(4096), b"")), daemon=True)
     reader.start()
@@ -164,8 +165,21 @@ def _result(out: Path) -> dict:
 
 
 def check_reconstruct(scene: Path, tmp_path: Path, seed: int, kills: int) -> int:
-    args = lambda out: ["reconstruct", str(scene), "--method", "sift", "--out", str(out), "--threads", "1",  # noqa: E731
-                        "--camera", "reference", "--fix-intrinsics"]
+    def args(out):
+        return [
+            "reconstruct",
+            str(scene),
+            "--method",
+            "sift",
+            "--out",
+            str(out),
+            "--threads",
+            "1",
+            "--camera",
+            "reference",
+            "--fix-intrinsics",
+        ]
+
     whole, again = tmp_path / "whole", tmp_path / "killed"
     span = _uninterrupted(args(whole))
     killed = _kill_repeatedly(args(again), np.random.default_rng(seed), span, kills)

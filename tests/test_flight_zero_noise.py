@@ -18,8 +18,16 @@ def clean_flight(tmp_path_factory):
 
 @pytest.mark.parametrize("method", ["sift", "lburst"])
 def test_every_image_registers_at_zero_noise(clean_flight, tmp_path, method):
-    result = reconstruct_scene(clean_flight, method, tmp_path / method, progress=False, camera="reference",
-                               fix_intrinsics=True, pairs="sequential", overlap=4,
-                               num_threads=1)  # one thread: the same result on a busy or an idle machine
+    result = reconstruct_scene(
+        clean_flight,
+        method,
+        tmp_path / method,
+        progress=False,
+        camera="reference",
+        fix_intrinsics=True,
+        pairs="sequential",
+        overlap=4,
+        num_threads=1,
+    )  # one thread: the same result on a busy or an idle machine
     assert result.error is None and result.registered == result.names
     assert result.metrics["ate_percent"] < 1.0

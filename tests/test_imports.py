@@ -123,8 +123,11 @@ def imports_argparse(path: Path) -> bool:
 
 def test_only_the_command_line_parses_arguments():
     """Every parser lives in lburst/cli/; library modules take typed arguments."""
-    found = sorted(name for name, path in module_names().items()
-                   if name != "lburst.cli" and not name.startswith("lburst.cli.") and imports_argparse(path))
+    found = sorted(
+        name
+        for name, path in module_names().items()
+        if name != "lburst.cli" and not name.startswith("lburst.cli.") and imports_argparse(path)
+    )
     assert not found, f"modules outside lburst/cli/ that import argparse: {found}"
 
 
@@ -132,20 +135,25 @@ def test_no_two_packages_import_each_other():
     packages: dict[str, set[str]] = {}
     for name, deps in import_graph().items():
         packages.setdefault(package_of(name), set()).update(
-            package_of(d) for d in deps if package_of(d) != package_of(name))
+            package_of(d) for d in deps if package_of(d) != package_of(name)
+        )
     found = cycles(packages)
     assert not found, f"import cycles between packages: {[sorted(c) for c in found]}"
 
 
 def test_colmap_child_and_poses_import_no_torch_opencv_or_tqdm():
-    code = ("import sys, lburst.cli.colmap_job, lburst.sfm.colmap, lburst.sfm.poses\n"
-            "print(','.join(m for m in ('torch', 'cv2', 'tqdm', 'pycolmap', 'matplotlib') if m in sys.modules))")
+    code = (
+        "import sys, lburst.cli.colmap_job, lburst.sfm.colmap, lburst.sfm.poses\n"
+        "print(','.join(m for m in ('torch', 'cv2', 'tqdm', 'pycolmap', 'matplotlib') if m in sys.modules))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"
 
 
 def test_import_lburst_and_its_methods_registry_is_light():
-    code = ("import sys, lburst, lburst.methods, lburst.features, lburst.extras\n"
-            "print(','.join(m for m in ('torch', 'pycolmap', 'matplotlib', 'skimage') if m in sys.modules))")
+    code = (
+        "import sys, lburst, lburst.methods, lburst.features, lburst.extras\n"
+        "print(','.join(m for m in ('torch', 'pycolmap', 'matplotlib', 'skimage') if m in sys.modules))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"

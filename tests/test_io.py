@@ -88,8 +88,12 @@ def test_errors_name_the_file_and_the_problem(tmp_path):
 
 def test_features_npz_and_h5(tmp_path):
     rng = np.random.default_rng(0)
-    feats = {"keypoints": rng.uniform(0, 30, (7, 2)).astype(np.float32), "scales": np.full(7, 32.0, np.float32),
-             "scores": rng.uniform(0, 1, 7).astype(np.float32), "descriptors": rng.normal(size=(7, 128)).astype(np.float32)}
+    feats = {
+        "keypoints": rng.uniform(0, 30, (7, 2)).astype(np.float32),
+        "scales": np.full(7, 32.0, np.float32),
+        "scores": rng.uniform(0, 1, 7).astype(np.float32),
+        "descriptors": rng.normal(size=(7, 128)).astype(np.float32),
+    }
     write_features_npz(tmp_path / "a.npz", feats, (32, 24))
     back = read_features_npz(tmp_path / "a.npz")
     for key in feats:

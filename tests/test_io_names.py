@@ -39,8 +39,11 @@ def test_extract_on_a_folder_whose_name_is_not_utf8_does_not_crash(tmp_path):
     folder = tmp_path / BAD
     save_burst(_frames(), folder)
     out = tmp_path / f"out{BAD}"
-    proc = subprocess.run([sys.executable, "-c", RUN_CLI, "extract", os.fsencode(folder), "--out", os.fsencode(out),
-                           "--method", "sift"], capture_output=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", RUN_CLI, "extract", os.fsencode(folder), "--out", os.fsencode(out), "--method", "sift"],
+        capture_output=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr.decode(errors="replace")[-2000:]
     assert len(np.load(out / f"{BAD}.npz")["keypoints"]) > 0
 
@@ -49,6 +52,10 @@ def test_no_module_hands_opencv_a_raw_path():
     """Only :mod:`lburst.io` calls OpenCV with a file name, and only through ``opencv_path``."""
     root = Path(__file__).resolve().parents[1] / "lburst"
     raw = re.compile(r"cv2\.(imread|imwrite|imreadmulti|VideoCapture|VideoWriter)\((?!opencv_path\()")
-    offenders = [f"{path.relative_to(root)}:{n}" for path in root.rglob("*.py")
-                 for n, line in enumerate(path.read_text().splitlines(), 1) if raw.search(line)]
+    offenders = [
+        f"{path.relative_to(root)}:{n}"
+        for path in root.rglob("*.py")
+        for n, line in enumerate(path.read_text().splitlines(), 1)
+        if raw.search(line)
+    ]
     assert not offenders

@@ -12,8 +12,12 @@ from lburst.matching import available, create
 
 def feats(desc: np.ndarray) -> dict:
     k = len(desc)
-    return {"keypoints": np.zeros((k, 2), np.float32), "scales": np.ones(k, np.float32),
-            "scores": np.ones(k, np.float32), "descriptors": desc}
+    return {
+        "keypoints": np.zeros((k, 2), np.float32),
+        "scales": np.ones(k, np.float32),
+        "scores": np.ones(k, np.float32),
+        "descriptors": desc,
+    }
 
 
 def unit(rng, n, d=16):
@@ -88,8 +92,11 @@ def test_ratio_test_on_binary_descriptors_and_edge_cases():
 def test_bad_specs_name_the_valid_options():
     with pytest.raises(ValueError, match=r"unknown matcher 'nope'; available: mnn \(max_distance"):
         create("nope")
-    with pytest.raises(ValueError, match=r"unknown options for matcher 'ratio': foo; valid: ratio: float = 0.8, "
-                                         r"mutual: bool = true"):
+    with pytest.raises(
+        ValueError,
+        match=r"unknown options for matcher 'ratio': foo; valid: ratio: float = 0.8, "
+        r"mutual: bool = true",
+    ):
         create("ratio,foo=1")
     with pytest.raises(ValueError, match=r"option ratio of matcher 'ratio': expected float, got 'x'"):
         create("ratio,ratio=x")
@@ -100,8 +107,15 @@ def test_bad_specs_name_the_valid_options():
     assert matcher_spec("mnn,max_distance=1.2") == "mnn,max_distance=1.2"
 
 
-@pytest.mark.parametrize("words", [["reconstruct", "scene", "--out", "o"], ["bench", "homography", "data"],
-                                   ["bench", "reconstruction", "scene", "--out", "o"], ["demo"]])
+@pytest.mark.parametrize(
+    "words",
+    [
+        ["reconstruct", "scene", "--out", "o"],
+        ["bench", "homography", "data"],
+        ["bench", "reconstruction", "scene", "--out", "o"],
+        ["demo"],
+    ],
+)
 def test_commands_check_the_matcher_before_they_start(words, capsys):
     from lburst.cli import main
 

@@ -33,8 +33,12 @@ class Toy:
 
     def __call__(self, burst: np.ndarray) -> dict:
         k = self.options.count
-        return {"keypoints": np.zeros((k, 2), np.float32), "scales": np.ones(k, np.float32),
-                "scores": np.ones(k, np.float32), "descriptors": np.ones((k, 4), np.float32)}
+        return {
+            "keypoints": np.zeros((k, 2), np.float32),
+            "scales": np.ones(k, np.float32),
+            "scores": np.ones(k, np.float32),
+            "descriptors": np.ones((k, 4), np.float32),
+        }
 
 
 @pytest.fixture
@@ -56,17 +60,23 @@ def test_spec_strings_become_typed_options(toy):
     assert create(toy, pair="none").options.pair is None
 
 
-@pytest.mark.parametrize("spec, message", [
-    ("toy-test,colour=red", r"unknown options for method 'toy-test': colour; valid: count: int = 3, "
-                            r"scale: float = 1.5, flag: bool = false, mode: a\|b = a, pair: float:float \| none = none"),
-    ("toy-test,count=2.5", r"option count of method 'toy-test': expected int, got '2.5'"),
-    ("toy-test,flag=maybe", r"option flag of method 'toy-test': expected a boolean"),
-    ("toy-test,mode=c", r"option mode of method 'toy-test': expected one of a, b, got 'c'"),
-    ("toy-test,pair=1", r"option pair of method 'toy-test': expected 2 numbers"),
-    ("toy-test:weights.pt", r"method 'toy-test' takes no argument, got 'weights.pt'"),
-    ("toy-test,count", r"bad option 'count' in method spec 'toy-test,count': expected KEY=VALUE"),
-    ("nope", r"unknown method 'nope' in 'nope'; available: .*sift"),
-])
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        (
+            "toy-test,colour=red",
+            r"unknown options for method 'toy-test': colour; valid: count: int = 3, "
+            r"scale: float = 1.5, flag: bool = false, mode: a\|b = a, pair: float:float \| none = none",
+        ),
+        ("toy-test,count=2.5", r"option count of method 'toy-test': expected int, got '2.5'"),
+        ("toy-test,flag=maybe", r"option flag of method 'toy-test': expected a boolean"),
+        ("toy-test,mode=c", r"option mode of method 'toy-test': expected one of a, b, got 'c'"),
+        ("toy-test,pair=1", r"option pair of method 'toy-test': expected 2 numbers"),
+        ("toy-test:weights.pt", r"method 'toy-test' takes no argument, got 'weights.pt'"),
+        ("toy-test,count", r"bad option 'count' in method spec 'toy-test,count': expected KEY=VALUE"),
+        ("nope", r"unknown method 'nope' in 'nope'; available: .*sift"),
+    ],
+)
 def test_bad_specs_say_what_is_valid(toy, spec, message):
     with pytest.raises(ValueError, match=message):
         create(spec)
@@ -75,7 +85,11 @@ def test_bad_specs_say_what_is_valid(toy, spec, message):
 def test_wrappers_are_registered_methods_with_their_own_options():
     spec = parse_spec("merge,reduce=median+orb,max_features=300")
     assert (spec.name, spec.options, spec.inner.name, spec.inner.options) == (
-        "merge", {"reduce": "median"}, "orb", {"max_features": "300"})
+        "merge",
+        {"reduce": "median"},
+        "orb",
+        {"max_features": "300"},
+    )
     extractor = create("merge,reduce=median+orb,max_features=300")
     assert extractor.reduce == "median" and extractor.inner.name == "orb,max_features=300"
     with pytest.raises(ValueError, match=r"option reduce of method 'merge': expected one of mean, median"):

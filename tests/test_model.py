@@ -64,8 +64,12 @@ def test_published_frame_order():
         frame_permutation(5, "reversed")
 
 
-TILINGS = {"default tiles": {}, "bands of 3 rows": {"head_band_rows": 3}, "stripes of 4 rows": {"stripe_rows": 4},
-           "whole map": {"tiled": False}}
+TILINGS = {
+    "default tiles": {},
+    "bands of 3 rows": {"head_band_rows": 3},
+    "stripes of 4 rows": {"stripe_rows": 4},
+    "whole map": {"tiled": False},
+}
 
 
 @pytest.mark.parametrize("tiling", TILINGS.values(), ids=TILINGS.keys())

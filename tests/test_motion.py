@@ -21,14 +21,22 @@ def _centroid(frame):
 
 def test_common_frame_is_identity_and_translation_matches_the_shift():
     m = BurstMotion(shift=(1.5, -2.0))
-    assert np.allclose(BurstMotion(rotation_deg=3, zoom=0.02, flow_px=2).source_points(0, (40, 30)),
-                       np.stack(np.mgrid[0:30, 0:40][::-1], -1))
+    assert np.allclose(
+        BurstMotion(rotation_deg=3, zoom=0.02, flow_px=2).source_points(0, (40, 30)),
+        np.stack(np.mgrid[0:30, 0:40][::-1], -1),
+    )
     pts = m.source_points(2, (40, 30))
     assert np.allclose(pts[10, 20], [20 - 3.0, 10 + 4.0])
 
 
-@pytest.mark.parametrize("motion", [BurstMotion(rotation_deg=1.0), BurstMotion(zoom=0.01),
-                                    BurstMotion(shift=(1.0, 0.5), rotation_deg=-0.8, zoom=0.01)])
+@pytest.mark.parametrize(
+    "motion",
+    [
+        BurstMotion(rotation_deg=1.0),
+        BurstMotion(zoom=0.01),
+        BurstMotion(shift=(1.0, 0.5), rotation_deg=-0.8, zoom=0.01),
+    ],
+)
 def test_a_blob_moves_where_the_affine_part_sends_it(motion):
     img = _blob_image()
     burst = simulate_burst(img, 5, motion=motion)

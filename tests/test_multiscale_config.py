@@ -9,21 +9,42 @@ from lburst.model.extractor import LBurst, MultiScaleConfig
 from lburst.model.network import LBurstNet, NetConfig
 
 
-@pytest.mark.parametrize("options, field", [
-    ({"scale_factor": 1.0}, "scale_factor"), ({"scale_factor": 0.5}, "scale_factor"),
-    ({"scale_factor": 0.0}, "scale_factor"), ({"scale_factor": float("nan")}, "scale_factor"),
-    ({"scale_factor": 1.0001}, "pyramid levels"), ({"min_size": 0}, "min_size"), ({"min_size": 2.5}, "min_size"),
-    ({"max_size": 100, "min_size": 200}, "max_size"), ({"rel_thr": 1.5}, "rel_thr"), ({"rep_thr": -0.1}, "rep_thr"),
-    ({"top_k": -1}, "top_k"), ({"top_k": 3.5}, "top_k"), ({"top_k": True}, "top_k"), ({"max_scale": 0.0}, "scales"),
-    ({"fast": "no"}, "fast"), ({"precision": "fp8"}, "precision"),
-])
+@pytest.mark.parametrize(
+    "options, field",
+    [
+        ({"scale_factor": 1.0}, "scale_factor"),
+        ({"scale_factor": 0.5}, "scale_factor"),
+        ({"scale_factor": 0.0}, "scale_factor"),
+        ({"scale_factor": float("nan")}, "scale_factor"),
+        ({"scale_factor": 1.0001}, "pyramid levels"),
+        ({"min_size": 0}, "min_size"),
+        ({"min_size": 2.5}, "min_size"),
+        ({"max_size": 100, "min_size": 200}, "max_size"),
+        ({"rel_thr": 1.5}, "rel_thr"),
+        ({"rep_thr": -0.1}, "rep_thr"),
+        ({"top_k": -1}, "top_k"),
+        ({"top_k": 3.5}, "top_k"),
+        ({"top_k": True}, "top_k"),
+        ({"max_scale": 0.0}, "scales"),
+        ({"fast": "no"}, "fast"),
+        ({"precision": "fp8"}, "precision"),
+    ],
+)
 def test_bad_settings_are_refused_by_name(options, field):
     with pytest.raises(ValueError, match=field):
         MultiScaleConfig(**options)
 
 
-@pytest.mark.parametrize("spec", ["lburst,scale_factor=1", "lburst,scale_factor=0.5", "lburst,scale_factor=0",
-                                  "lburst,min_size=0", "lburst,rel_thr=2"])
+@pytest.mark.parametrize(
+    "spec",
+    [
+        "lburst,scale_factor=1",
+        "lburst,scale_factor=0.5",
+        "lburst,scale_factor=0",
+        "lburst,min_size=0",
+        "lburst,rel_thr=2",
+    ],
+)
 def test_bad_settings_in_a_method_spec_fail_at_creation(spec):
     with pytest.raises(ValueError, match="scale_factor|min_size|rel_thr"):
         create(spec, device="cpu")

@@ -124,7 +124,9 @@ def test_burst_frames_follow_the_flight():
     # common frames are burst_spacing apart along the path, which turns by turn_deg
     ref = nf.reference(cfg)
     ref_centres = np.array(list(ref.centers().values()))
-    np.testing.assert_allclose(np.linalg.norm(np.diff(ref_centres, axis=0), axis=1), chord(cfg, cfg.burst_spacing), rtol=1e-9)
+    np.testing.assert_allclose(
+        np.linalg.norm(np.diff(ref_centres, axis=0), axis=1), chord(cfg, cfg.burst_spacing), rtol=1e-9
+    )
     first, last = (ref.poses[n][0][2][:2] for n in ("0000", "0003"))
     turn = np.degrees(np.arctan2(first[0] * last[1] - first[1] * last[0], first @ last))
     # the wobble tilts the axis by <= ~0.5 deg, which moves its azimuth by up to 0.5 / sin(pitch)
@@ -148,7 +150,9 @@ def test_burst_frames_have_parallax_consistent_with_the_poses():
     assert flow.reshape(-1, 2).std(0).max() > 0.3, "frames should differ by more than a 2D shift"
     assert np.linalg.norm(np.median(flow.reshape(-1, 2), 0)) > 1.0, "the drone should move during the burst"
     maps = (uv0 - 0.5).astype(np.float32)  # OpenCV: top-left centre at (0, 0)
-    warped = cv2.remap(first, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1)
+    warped = cv2.remap(
+        first, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1
+    )
     seen = cv2.remap(depth0.astype(np.float32), maps[..., 0], maps[..., 1], cv2.INTER_NEAREST, borderValue=-1)
     valid = (warped.min(-1) >= 0) & (np.abs(seen - cam0[..., 2]) < 0.01 * cam0[..., 2])
     assert valid.mean() > 0.8
@@ -204,7 +208,9 @@ def test_make_night_flight_writes_and_resumes(tmp_path):
     assert frame.shape == (48, 64, 3) and frame.dtype == np.uint8
     np.testing.assert_array_equal(frame[..., ::-1], nf.clean_common_frames(cfg)["0001"])
     loaded = Reference.load(out / "reference.json")
-    assert loaded.source == "synthetic" and loaded.camera["params"] == [pytest.approx(v) for v in [55.4256, 55.4256, 32.0, 24.0]]
+    assert loaded.source == "synthetic" and loaded.camera["params"] == [
+        pytest.approx(v) for v in [55.4256, 55.4256, 32.0, 24.0]
+    ]
     assert loaded.length == pytest.approx(2 * chord(cfg, cfg.burst_spacing), rel=1e-9)
     np.testing.assert_allclose(loaded.poses["0002"][1], ref.poses["0002"][1])
     assert nf.NightFlightConfig.from_dict(json.loads((out / "night_flight.json").read_text())) == cfg
@@ -236,7 +242,12 @@ def test_command_line(tmp_path, capsys):
     parser = argparse.ArgumentParser()
     flight_command.configure_parser(parser)
     out = tmp_path / "flight"
-    assert flight_command.main(parser.parse_args([str(out), "--bursts", "2", "--frames", "3", "--size", "48x32", "--daylight"])) == 0
+    assert (
+        flight_command.main(
+            parser.parse_args([str(out), "--bursts", "2", "--frames", "3", "--size", "48x32", "--daylight"])
+        )
+        == 0
+    )
     assert Reference.load(out / "reference.json").camera["width"] == 48
     assert len(list((out / "0001").glob("frame_*.png"))) == 3
     assert flight_command.main(parser.parse_args([str(out), "--frames", "4"])) == 2
@@ -262,8 +273,14 @@ def test_colmap_sift_registers_the_clean_flight(tmp_path):
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = 1
     database = tmp_path / "database.db"
-    pycolmap.extract_features(database, images, camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
-                              extraction_options=extraction, device=pycolmap.Device.cpu)
+    pycolmap.extract_features(
+        database,
+        images,
+        camera_mode=pycolmap.CameraMode.SINGLE,
+        reader_options=reader,
+        extraction_options=extraction,
+        device=pycolmap.Device.cpu,
+    )
     pycolmap.match_exhaustive(database, device=pycolmap.Device.cpu)
     options = pycolmap.IncrementalPipelineOptions()
     options.num_threads = 1

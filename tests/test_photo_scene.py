@@ -77,15 +77,22 @@ def test_reference_options_are_kept_and_a_change_remakes_the_reference(photos):
     from lburst.scenes.photo_scene import REFERENCE_DIR, non_default_options, reference_options_used
 
     out = photos / "scene_single"
-    ref = simulate_scene(photos / "photos", out, frames=3, noise="gaussian:10", progress=False,
-                         reference_options={"single_camera": True, "num_threads": 2})
+    ref = simulate_scene(
+        photos / "photos",
+        out,
+        frames=3,
+        noise="gaussian:10",
+        progress=False,
+        reference_options={"single_camera": True, "num_threads": 2},
+    )
     assert ref is not None and len(ref.poses) == 6
     assert reference_options_used(out) == {"single_camera": True}  # defaults are not recorded
     cameras = reference_cameras(out / "reference.json")
     assert len({str(c["params"]) for c in cameras.values()}) == 1  # one shared camera
     stamp = (out / "reference.json").stat().st_mtime_ns
-    simulate_scene(photos / "photos", out, frames=3, noise="gaussian:10", progress=False,
-                   reference_options={"single_camera": True})
+    simulate_scene(
+        photos / "photos", out, frames=3, noise="gaussian:10", progress=False, reference_options={"single_camera": True}
+    )
     assert (out / "reference.json").stat().st_mtime_ns == stamp  # same options: reused
     simulate_scene(photos / "photos", out, frames=3, noise="gaussian:10", progress=False)
     assert reference_options_used(out) == {} and (out / REFERENCE_DIR / "options.json").is_file()

@@ -19,8 +19,11 @@ from lburst.model.extractor import LBurst, MultiScaleConfig  # noqa: E402
 from lburst.model.network import LBurstNet, NetConfig  # noqa: E402
 
 EXAMPLES = int(os.environ.get("LBURST_HYPOTHESIS_EXAMPLES", "40"))
-SETTINGS = settings(max_examples=EXAMPLES, deadline=None,
-                    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+SETTINGS = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 NET = LBurst(LBurstNet(NetConfig(frames=1)))
 
 
@@ -38,8 +41,10 @@ def test_any_file_bytes_load_or_raise_a_burst_error(tmp_path_factory, data, suff
 
 
 @SETTINGS
-@given(image=hnp.arrays(st.sampled_from([np.uint8, np.uint16]), st.tuples(st.integers(1, 40), st.integers(1, 40))),
-       keep=st.floats(0.05, 1.0))
+@given(
+    image=hnp.arrays(st.sampled_from([np.uint8, np.uint16]), st.tuples(st.integers(1, 40), st.integers(1, 40))),
+    keep=st.floats(0.05, 1.0),
+)
 def test_truncated_encodings_never_load_as_a_partial_frame(tmp_path_factory, image, keep):
     folder = tmp_path_factory.mktemp("enc")
     for suffix in (".png", ".jpg"):
@@ -63,13 +68,24 @@ finite = st.floats(allow_nan=True, allow_infinity=True, width=32)
 
 
 @SETTINGS
-@given(min_size=st.one_of(st.integers(-5, 600), finite), max_size=st.integers(-5, 2000),
-       scale_factor=st.one_of(finite, st.integers(-2, 4)), rel_thr=finite, rep_thr=finite,
-       top_k=st.one_of(st.none(), st.integers(-3, 5000), finite, st.booleans()))
+@given(
+    min_size=st.one_of(st.integers(-5, 600), finite),
+    max_size=st.integers(-5, 2000),
+    scale_factor=st.one_of(finite, st.integers(-2, 4)),
+    rel_thr=finite,
+    rep_thr=finite,
+    top_k=st.one_of(st.none(), st.integers(-3, 5000), finite, st.booleans()),
+)
 def test_multiscale_settings_are_valid_or_a_value_error(min_size, max_size, scale_factor, rel_thr, rep_thr, top_k):
     try:
-        cfg = MultiScaleConfig(min_size=min_size, max_size=max_size, scale_factor=scale_factor, rel_thr=rel_thr,
-                               rep_thr=rep_thr, top_k=top_k)
+        cfg = MultiScaleConfig(
+            min_size=min_size,
+            max_size=max_size,
+            scale_factor=scale_factor,
+            rel_thr=rel_thr,
+            rep_thr=rep_thr,
+            top_k=top_k,
+        )
     except ValueError as err:
         assert str(err)
         return
@@ -77,12 +93,21 @@ def test_multiscale_settings_are_valid_or_a_value_error(min_size, max_size, scal
 
 
 @SETTINGS
-@given(shape=st.tuples(st.integers(1, 48), st.integers(1, 48)),
-       dtype=st.sampled_from([np.uint8, np.uint16, np.float32, np.float64, np.int32, np.bool_]),
-       scale=st.sampled_from([1.0, 255.0, np.nan, np.inf]),
-       options=st.fixed_dictionaries({}, optional={
-           "min_size": st.integers(1, 64), "scale_factor": st.floats(1.05, 3.0), "top_k": st.integers(0, 50),
-           "rel_thr": st.floats(0, 1), "rep_thr": st.floats(0, 1)}))
+@given(
+    shape=st.tuples(st.integers(1, 48), st.integers(1, 48)),
+    dtype=st.sampled_from([np.uint8, np.uint16, np.float32, np.float64, np.int32, np.bool_]),
+    scale=st.sampled_from([1.0, 255.0, np.nan, np.inf]),
+    options=st.fixed_dictionaries(
+        {},
+        optional={
+            "min_size": st.integers(1, 64),
+            "scale_factor": st.floats(1.05, 3.0),
+            "top_k": st.integers(0, 50),
+            "rel_thr": st.floats(0, 1),
+            "rep_thr": st.floats(0, 1),
+        },
+    ),
+)
 def test_extract_gives_features_or_a_value_error(shape, dtype, scale, options):
     rng = np.random.default_rng(0)
     image = rng.uniform(0, 1, (*shape, 3))
@@ -104,13 +129,22 @@ def test_extract_gives_features_or_a_value_error(shape, dtype, scale, options):
 
 
 @SETTINGS
-@given(spec=st.one_of(st.text(alphabet="abcefhilmnorstu:=,+ 0123456789._-", max_size=40),
-                      st.builds(lambda name, pairs: name + "".join(f",{k}={v}" for k, v in pairs),
-                                st.sampled_from(["sift", "orb", "merge+sift", "buff", "lburst", "r2d2"]),
-                                st.lists(st.tuples(st.sampled_from(["top_k", "scale_factor", "min_size", "rel_thr",
-                                                                    "max_features", "reduce", "nope"]),
-                                                   st.sampled_from(["-1", "0", "1", "1.0", "0.5", "x", "none", ""])),
-                                         max_size=2))))
+@given(
+    spec=st.one_of(
+        st.text(alphabet="abcefhilmnorstu:=,+ 0123456789._-", max_size=40),
+        st.builds(
+            lambda name, pairs: name + "".join(f",{k}={v}" for k, v in pairs),
+            st.sampled_from(["sift", "orb", "merge+sift", "buff", "lburst", "r2d2"]),
+            st.lists(
+                st.tuples(
+                    st.sampled_from(["top_k", "scale_factor", "min_size", "rel_thr", "max_features", "reduce", "nope"]),
+                    st.sampled_from(["-1", "0", "1", "1.0", "0.5", "x", "none", ""]),
+                ),
+                max_size=2,
+            ),
+        ),
+    )
+)
 def test_method_specs_create_an_extractor_or_raise_a_value_error(spec):
     from lburst.methods import create
 

@@ -14,8 +14,26 @@ pytest.importorskip("av")
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
     out = tmp_path_factory.mktemp("cli")
-    assert main(["simulate", "flight", "--video", str(out / "f.mp4"), "--dng", str(out / "f_dng"), "--bursts", "2",
-                 "--size", "128x96", "--noise", "lowlight:night", "--loop"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "flight",
+                "--video",
+                str(out / "f.mp4"),
+                "--dng",
+                str(out / "f_dng"),
+                "--bursts",
+                "2",
+                "--size",
+                "128x96",
+                "--noise",
+                "lowlight:night",
+                "--loop",
+            ]
+        )
+        == 0
+    )
     return out
 
 
@@ -29,8 +47,22 @@ def test_simulate_writes_video_dng_and_ground_truth(recordings):
 
 def test_extract_and_show_take_recordings(recordings, tmp_path, capsys):
     out = tmp_path / "feats"
-    assert main(["extract", str(recordings / "f.mp4"), str(recordings / "f_dng"), "--every", "16", "--method", "orb",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "extract",
+                str(recordings / "f.mp4"),
+                str(recordings / "f_dng"),
+                "--every",
+                "16",
+                "--method",
+                "orb",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     for name in ("f", "f_dng"):
         files = sorted(p.name for p in (out / name).glob("*.npz"))
         assert files == ["f000000_t0.000s.npz", "f000016_t0.800s.npz", "f000032_t1.600s.npz"]
@@ -53,8 +85,11 @@ def test_raw_gain_matters_on_dark_dng(recordings):
     from lburst.sources import RecordingOptions, open_recording
 
     auto = next(open_recording(recordings / "f_dng", RecordingOptions(burst=3)).bursts())[1]
-    linear = next(open_recording(recordings / "f_dng", RecordingOptions(
-        burst=3, normalisation=Normalisation(gain="none"))).bursts())[1]
+    linear = next(
+        open_recording(
+            recordings / "f_dng", RecordingOptions(burst=3, normalisation=Normalisation(gain="none"))
+        ).bursts()
+    )[1]
     assert linear.dtype == np.uint16 and linear.mean() / 65535 < 0.05  # a dark RAW frame
     assert auto.dtype == np.uint8 and 40 < auto.mean() < 200
 
@@ -70,7 +105,7 @@ def _raw_video(path, frames=100, size=(96, 128)):
         stream = container.add_stream("rawvideo", rate=20)
         stream.width, stream.height, stream.pix_fmt = size[1], size[0], "bgr24"
         for k in range(frames):
-            image = np.ascontiguousarray(texture[50:50 + size[0], k:k + size[1]])
+            image = np.ascontiguousarray(texture[50 : 50 + size[0], k : k + size[1]])
             container.mux(stream.encode(av.VideoFrame.from_ndarray(image, format="rgb24")))
         container.mux(stream.encode())
 
@@ -86,7 +121,7 @@ def test_a_video_changed_in_its_middle_is_extracted_again(tmp_path):
     before = {name: read_features_npz(tmp_path / "out" / "v" / name) for name in names}
     data = bytearray(video.read_bytes())
     frame = data.index(b"00dc", size // 2) + 8  # the pixels of the frame after the middle byte (an AVI chunk)
-    data[frame:frame + 30000] = bytes(255 - b for b in data[frame:frame + 30000])
+    data[frame : frame + 30000] = bytes(255 - b for b in data[frame : frame + 30000])
     video.write_bytes(bytes(data))  # same size, same first and last MiB
     assert main(["extract", str(video), *args, str(tmp_path / "out")]) == 0
     assert main(["extract", str(video), *args, str(tmp_path / "fresh")]) == 0
@@ -111,7 +146,7 @@ def test_a_frame_folder_with_a_frame_rewritten_at_the_same_size_is_extracted_aga
     (folder / "meta.json").write_text(json.dumps({"fps": 20}))
     texture = skimage.data.astronaut()[::2, ::2]
     for k in range(9):
-        cv2.imwrite(str(folder / f"frame_{k:03d}.ppm"), texture[50:146, 3 * k:3 * k + 128, ::-1])
+        cv2.imwrite(str(folder / f"frame_{k:03d}.ppm"), texture[50:146, 3 * k : 3 * k + 128, ::-1])
     args = ["--every", "4", "--burst", "3", "--method", "orb", "--out"]
     assert main(["extract", str(folder), *args, str(tmp_path / "out")]) == 0
     before = read_features_npz(tmp_path / "out" / "rec" / "f000004_t0.200s.npz")

@@ -36,8 +36,9 @@ def test_simulated_video_has_per_frame_ground_truth(video):
 
 
 def test_video_reconstructs_and_evo_agrees(video, tmp_path):
-    result = reconstruct_scene(video, SIFT, tmp_path / "out", progress=False, extra=FAST,
-                               recording=RecordingOptions(burst=3, every=16))
+    result = reconstruct_scene(
+        video, SIFT, tmp_path / "out", progress=False, extra=FAST, recording=RecordingOptions(burst=3, every=16)
+    )
     assert result.names == [f"f{i:06d}_t{i / 20:.3f}s" for i in range(0, 97, 16)]
     assert result.registered == result.names and result.source_error is None
     assert result.metrics["ate_percent"] < 1.0
@@ -71,8 +72,9 @@ def test_truncated_video_keeps_the_keyframes_before_the_cut(video, tmp_path):
     cut = tmp_path / "cut.mp4"
     data = video.read_bytes()
     cut.write_bytes(data[: int(len(data) * 0.8)])
-    result = reconstruct_scene(cut, SIFT, tmp_path / "out", progress=False, extra=FAST,
-                               recording=RecordingOptions(burst=3, every=16))
+    result = reconstruct_scene(
+        cut, SIFT, tmp_path / "out", progress=False, extra=FAST, recording=RecordingOptions(burst=3, every=16)
+    )
     assert "cut.mp4" in result.source_error and "truncated" in result.source_error
     assert 2 <= len(result.names) < 7 and result.registered == result.names
 
@@ -84,7 +86,8 @@ def test_dng_recording_reconstructs(tmp_path):
     cfg = NightFlightConfig.daylight(n_bursts=3, width=256, height=192, noise="lowlight:2000")
     folder = write_flight_dng(tmp_path / "dng", cfg, progress=False)
     assert len(list(folder.glob("*.dng"))) == 65
-    result = reconstruct_scene(folder, SIFT, tmp_path / "out", progress=False, extra=FAST,
-                               recording=RecordingOptions(burst=1, every=16))
+    result = reconstruct_scene(
+        folder, SIFT, tmp_path / "out", progress=False, extra=FAST, recording=RecordingOptions(burst=1, every=16)
+    )
     assert result.registered == result.names and len(result.names) == 5
     assert result.metrics["ate_percent"] < 1.0

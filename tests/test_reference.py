@@ -53,7 +53,10 @@ def test_length_may_be_null(tmp_path):
     [
         ("{not json", "not valid JSON"),
         (json.dumps({"source": "x", "images": {}}), "camera"),
-        (json.dumps({"source": "x", "camera": {"model": "PINHOLE", "width": 4, "height": 4}, "images": {}}), "camera.params"),
+        (
+            json.dumps({"source": "x", "camera": {"model": "PINHOLE", "width": 4, "height": 4}, "images": {}}),
+            "camera.params",
+        ),
         (
             json.dumps(
                 {

@@ -13,8 +13,10 @@ def small_job(tmp_path):
     keypoints = [rng.uniform(0, 300, size=(k, 2)).astype(np.float32) for k in (50, 40, 30)]
     keypoints[0][0] = (0.0, 0.0)  # the centre of the top-left pixel
     pairs = np.array([[0, 1], [0, 2], [1, 2]])
-    matches = [np.stack([rng.permutation(ka)[:m], rng.permutation(kb)[:m]], 1)
-               for (ka, kb), m in zip([(50, 40), (50, 30), (40, 30)], (20, 10, 0))]
+    matches = [
+        np.stack([rng.permutation(ka)[:m], rng.permutation(kb)[:m]], 1)
+        for (ka, kb), m in zip([(50, 40), (50, 30), (40, 30)], (20, 10, 0))
+    ]
     cams = [default_camera(320, 240), default_camera(320, 240, "PINHOLE", focal=300.0)]
     job = ColmapJob(names, str(tmp_path / "images"), cams, [0, 1, 0])
     return job, keypoints, pairs, matches
@@ -74,8 +76,9 @@ def test_epipolar_distance_of_a_rectified_pair():
     xa, xb = project(points, pose_a[1]), project(points, pose_b[1])
     np.testing.assert_allclose(epipolar_distances(xa, xb, camera, camera, pose_a, pose_b), 0, atol=1e-9)
     xb_moved = xb + [[0, 3.0], [7.0, 0.0], [0, -1.5]]  # off the row by 3 px; along it; off by 1.5 px
-    np.testing.assert_allclose(epipolar_distances(xa, xb_moved, camera, camera, pose_a, pose_b), [3.0, 0.0, 1.5],
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        epipolar_distances(xa, xb_moved, camera, camera, pose_a, pose_b), [3.0, 0.0, 1.5], atol=1e-9
+    )
 
 
 def test_a_failing_colmap_child_is_reported_not_fatal(tmp_path):

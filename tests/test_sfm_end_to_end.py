@@ -19,9 +19,14 @@ def flight(tmp_path_factory):
 
 
 def test_sift_registers_a_synthetic_flight(flight, tmp_path):
-    result = reconstruct_scene(flight, "sift,max_features=1500", tmp_path / "out", progress=False,
-                               single_camera=True,  # one camera flew: share its intrinsics
-                               extra={"max_num_trials": 2000})  # fewer RANSAC trials: a faster test
+    result = reconstruct_scene(
+        flight,
+        "sift,max_features=1500",
+        tmp_path / "out",
+        progress=False,
+        single_camera=True,  # one camera flew: share its intrinsics
+        extra={"max_num_trials": 2000},
+    )  # fewer RANSAC trials: a faster test
     assert result.error is None and result.converged
     assert result.registered == result.names  # every image, in trajectory order
     m = result.metrics
@@ -44,7 +49,14 @@ def test_sift_registers_a_synthetic_flight(flight, tmp_path):
 
 @pytest.mark.slow
 def test_global_mapper_registers_the_flight(flight, tmp_path):
-    result = reconstruct_scene(flight, "sift,max_features=1500", tmp_path / "out", progress=False, mapper="global",
-                               single_camera=True, extra={"max_num_trials": 2000})
+    result = reconstruct_scene(
+        flight,
+        "sift,max_features=1500",
+        tmp_path / "out",
+        progress=False,
+        mapper="global",
+        single_camera=True,
+        extra={"max_num_trials": 2000},
+    )
     assert result.error is None and result.registered == result.names
     assert result.metrics["ate_percent"] < 1.0

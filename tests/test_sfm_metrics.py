@@ -27,8 +27,10 @@ def test_scene_metrics_without_a_model():
 
 
 def test_aggregate_trajectory_errors_over_converged_scenes_only():
-    rows = [{"converged": 1.0, "registered_pct": 100.0, "ate_rmse": 2.0},
-            {"converged": 0.0, "registered_pct": 0.0, "ate_rmse": 10.0}]
+    rows = [
+        {"converged": 1.0, "registered_pct": 100.0, "ate_rmse": 2.0},
+        {"converged": 0.0, "registered_pct": 0.0, "ate_rmse": 10.0},
+    ]
     mean = aggregate(rows)
     assert mean["converged"] == 0.5 and mean["registered_pct"] == 50.0
     assert mean["ate_rmse"] == 2.0 and mean["trajectory_scenes"] == 1
@@ -40,8 +42,9 @@ def test_aggregate_trajectory_errors_over_converged_scenes_only():
 def test_benchmark_skips_finished_runs(tmp_path):
     scene = tmp_path / "missing_scene"  # would fail if it were run again
     out = tmp_path / "bench" / method_slug("sift") / scene.name
-    done = ReconstructionResult(str(scene), "sift", str(out), ["a", "b"], ["a", "b"],
-                                metrics={"converged": 1.0, "registered_pct": 100.0})
+    done = ReconstructionResult(
+        str(scene), "sift", str(out), ["a", "b"], ["a", "b"], metrics={"converged": 1.0, "registered_pct": 100.0}
+    )
     done.save()
     report = run_benchmark([scene], ["sift", "orb"], tmp_path / "bench", progress=False)
     sift, orb = report["rows"]
@@ -68,8 +71,9 @@ def test_benchmark_evaluates_again_when_the_reference_is_remade(tmp_path):
     camera = {"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 50.0, 32.0, 24.0]}
     Reference("sift-clean", camera, poses, 3.0).save(scene / "reference.json")
     out = tmp_path / "bench" / method_slug("sift") / scene.name
-    ReconstructionResult(str(scene), "sift", str(out), names, names, poses=poses,
-                         metrics={"converged": 1.0, "registered_pct": 100.0}).save()
+    ReconstructionResult(
+        str(scene), "sift", str(out), names, names, poses=poses, metrics={"converged": 1.0, "registered_pct": 100.0}
+    ).save()
     first = run_benchmark([scene], ["sift"], tmp_path / "bench", progress=False)["rows"][0]
     assert first["ate_rmse"] < 1e-9 and first["reference_sha1"]
     # the reference is remade (another path): the finished run is evaluated again, not left with the old numbers
@@ -89,8 +93,10 @@ def test_benchmark_runs_a_scene_again_when_its_bursts_change(tmp_path):
     for i in range(3):
         image = np.random.default_rng(i).integers(0, 256, size=(120, 160, 3), dtype=np.uint8)
         cv2.imwrite(str(scene / f"{i}.png"), cv2.GaussianBlur(image, (0, 0), 1.0))
-    row = lambda out: run_benchmark([scene], ["sift"], tmp_path / out, progress=False,  # noqa: E731
-                                    num_threads=1)["rows"][0]
+
+    def row(out):
+        return run_benchmark([scene], ["sift"], tmp_path / out, progress=False, num_threads=1)["rows"][0]
+
     first = row("bench")
     assert row("bench")["keypoints_per_image"] == first["keypoints_per_image"]  # unchanged: finished
     cv2.imwrite(str(scene / "1.png"), np.zeros((120, 160, 3), np.uint8))  # the burst replaced by a black frame

@@ -50,7 +50,9 @@ def test_trajectory_in_another_similar_frame_has_zero_error():
 def test_known_centre_perturbation():
     d = 0.1
     reference = [pose_from(np.eye(3), c) for c in SQUARE]
-    bumps = np.array([[0, 0, d], [0, 0, -d], [0, 0, d], [0, 0, -d]])  # uncorrelated with the square: alignment stays put
+    bumps = np.array(
+        [[0, 0, d], [0, 0, -d], [0, 0, d], [0, 0, -d]]
+    )  # uncorrelated with the square: alignment stays put
     estimated = [pose_from(np.eye(3), c + b) for c, b in zip(SQUARE, bumps)]
     rigid = trajectory_errors(estimated, reference, with_scale=False, length=4.0)
     assert rigid["ate_rmse"] == pytest.approx(d)

@@ -113,7 +113,9 @@ def test_mixed_frame_sizes_name_the_frame(tmp_path):
 
 def test_sixteen_bit_frames_get_one_gain_per_recording(tmp_path):
     folder = _folder(tmp_path, range(9), dtype=np.uint16, scale=100)  # very dark linear frames
-    rec = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(percentile=100, target=0.5)))
+    rec = open_recording(
+        folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(percentile=100, target=0.5))
+    )
     bursts = list(rec.bursts())
     # the first burst is frames 0, 0, 1 (linear 0, 0, 100): its mean, 100 / 3, goes to 0.5
     assert rec.gain == pytest.approx(0.5 * 65535 / (100 / 3))
@@ -124,8 +126,9 @@ def test_sixteen_bit_frames_get_one_gain_per_recording(tmp_path):
     assert all(b.dtype == np.uint16 for _, b in linear.bursts())
     fixed = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(gain=65535 / 200)))
     assert _values(next(fixed.bursts())[1]) == [0, 0, 128]  # the default curve is linear: 100 -> half of white
-    srgb = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(
-        gain=65535 / 200, curve="srgb")))
+    srgb = open_recording(
+        folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(gain=65535 / 200, curve="srgb"))
+    )
     assert _values(next(srgb.bursts())[1]) == [0, 0, 188]
 
 
@@ -162,7 +165,9 @@ def test_dng_frames_read_linear_and_without_cfa_fail_clearly(tmp_path):
     tifffile.imwrite(tmp_path / "plain.dng", np.zeros((32, 48), np.uint16))  # LibRaw alone would take it
     with pytest.raises(BurstError, match="plain.dng: not a DNG"):
         read_dng(tmp_path / "plain.dng")
-    tifffile.imwrite(tmp_path / "nocfa.dng", np.zeros((32, 48), np.uint16), extratags=[(50706, 1, 4, (1, 4, 0, 0), True)])
+    tifffile.imwrite(
+        tmp_path / "nocfa.dng", np.zeros((32, 48), np.uint16), extratags=[(50706, 1, 4, (1, 4, 0, 0), True)]
+    )
     with pytest.raises(BurstError, match="nocfa.dng: DNG without a CFA image"):
         read_dng(tmp_path / "nocfa.dng")
 

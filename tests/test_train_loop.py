@@ -105,8 +105,16 @@ def test_flow_sends_blobs_of_a_onto_the_same_blobs_of_b():
     for cx, cy in rng.uniform(60, size - 60, (12, 2)):
         photo += 200 * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * 3.0**2))
     photo = np.repeat(np.clip(photo, 0, 255).astype(np.uint8)[..., None], 3, axis=2)
-    cfg = replace(TINY, crop=160, long_side=(400, 400), noise_variance=(0.0, 0.0), max_burst_motion=0.0,
-                  max_rotation_deg=10.0, max_tilt=0.1, max_pair_shift=8.0)
+    cfg = replace(
+        TINY,
+        crop=160,
+        long_side=(400, 400),
+        noise_variance=(0.0, 0.0),
+        max_burst_motion=0.0,
+        max_rotation_deg=10.0,
+        max_tilt=0.1,
+        max_pair_shift=8.0,
+    )
     pair = training_pair(photo, np.random.default_rng(5), cfg)
 
     def centres(img):
@@ -121,10 +129,12 @@ def test_flow_sends_blobs_of_a_onto_the_same_blobs_of_b():
     assert len(ca) >= 3
     checked = 0
     for x, y in ca:
-        target = np.array([
-            cv2.remap(pair.flow[..., 0], np.float32([[x]]), np.float32([[y]]), cv2.INTER_LINEAR)[0, 0],
-            cv2.remap(pair.flow[..., 1], np.float32([[x]]), np.float32([[y]]), cv2.INTER_LINEAR)[0, 0],
-        ])
+        target = np.array(
+            [
+                cv2.remap(pair.flow[..., 0], np.float32([[x]]), np.float32([[y]]), cv2.INTER_LINEAR)[0, 0],
+                cv2.remap(pair.flow[..., 1], np.float32([[x]]), np.float32([[y]]), cv2.INTER_LINEAR)[0, 0],
+            ]
+        )
         dist = np.linalg.norm(cb - target, axis=1)
         if dist.min() < 5:
             assert dist.min() < 0.1  # blob centres, so interpolation and blob shape distortion are small
@@ -178,8 +188,17 @@ def test_two_process_data_parallel_run_logs_the_mean_of_each_ranks_share(photos,
     from pathlib import Path
 
     helper = Path(__file__).parent / "helpers" / "ddp_train.py"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-           str(helper), str(photos), str(tmp_path / "run")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--standalone",
+        "--nproc_per_node",
+        "2",
+        str(helper),
+        str(photos),
+        str(tmp_path / "run"),
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     log = _log(tmp_path / "run" / "log.csv")
@@ -243,8 +262,9 @@ def test_burst_preset_pairs_have_a_clean_copy_and_general_motion(photos):
     item = ds[0]
     noise = (item["burst_a"] - item["clean_a"]).std()
     assert item["clean_a"].shape == item["burst_a"].shape and noise > 5
-    quiet = PairDataset(list_photos([photos], split="all"), replace(cfg, noise_std=(0.0, 0.0), lowlight_prob=0.0),
-                        seed=0, clean=True)[0]
+    quiet = PairDataset(
+        list_photos([photos], split="all"), replace(cfg, noise_std=(0.0, 0.0), lowlight_prob=0.0), seed=0, clean=True
+    )[0]
     assert torch.equal(quiet["burst_a"], quiet["clean_a"])
 
 
@@ -256,14 +276,18 @@ def test_distillation_pulls_the_noisy_output_towards_the_clean_one(photos):
     batch = {k: torch.stack([ds[i][k] for i in range(2)]) for k in ds[0]}
     torch.manual_seed(0)
     net = LBurstNet(NetConfig(frames=3)).train()
-    same = {"descriptors": torch.nn.functional.normalize(torch.randn(1, 8, 4, 4), dim=1),
-            "repeatability": torch.rand(1, 1, 4, 4), "reliability": torch.rand(1, 1, 4, 4)}
+    same = {
+        "descriptors": torch.nn.functional.normalize(torch.randn(1, 8, 4, 4), dim=1),
+        "repeatability": torch.rand(1, 1, 4, 4),
+        "reliability": torch.rand(1, 1, 4, 4),
+    }
     assert distillation_loss(same, same).item() == pytest.approx(0.0, abs=1e-6)
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
     values = []
     for _ in range(6):
-        losses = training_step(net, batch, patch=8, generator=torch.Generator().manual_seed(0),
-                               distill_weight=10.0, teacher=net)
+        losses = training_step(
+            net, batch, patch=8, generator=torch.Generator().manual_seed(0), distill_weight=10.0, teacher=net
+        )
         opt.zero_grad()
         losses["loss"].backward()
         opt.step()
@@ -315,8 +339,17 @@ def test_a_burst_network_replicated_from_a_single_image_one_equals_it_on_the_mea
 def test_aligned_preset_frames_are_warped_back_onto_the_common_frame(photos):
     from lburst.train.loop import PRESETS
 
-    base = replace(PRESETS["burst"]["pair"], crop=96, long_side=(200, 256), max_pair_shift=6, noise_std=(0.0, 0.0),
-                   lowlight_prob=0.0, burst_rotation_deg=0.0, burst_zoom=0.0, burst_flow_px=0.0)
+    base = replace(
+        PRESETS["burst"]["pair"],
+        crop=96,
+        long_side=(200, 256),
+        max_pair_shift=6,
+        noise_std=(0.0, 0.0),
+        lowlight_prob=0.0,
+        burst_rotation_deg=0.0,
+        burst_zoom=0.0,
+        burst_flow_px=0.0,
+    )
     photo_list = list_photos([photos], split="all")
     moving = PairDataset(photo_list, base, seed=1)[0]["burst_a"]
     aligned = PairDataset(photo_list, replace(base, align_error_px=0.0), seed=1)[0]["burst_a"]

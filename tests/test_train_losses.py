@@ -94,8 +94,15 @@ def test_descriptor_gradients_flow_through_the_ap_loss():
     desc_a = torch.randn(1, 8, h, w, requires_grad=True)
     desc_b = torch.randn(1, 8, h, w, requires_grad=True)
     flow, mask = _shift_flow(h, w, 0, 0)
-    loss, _ = reliability_ap_loss(F.normalize(desc_a, dim=1), F.normalize(desc_b, dim=1),
-                                  torch.full((1, 1, h, w), 0.5), flow, mask, None, APSampling(border=8))
+    loss, _ = reliability_ap_loss(
+        F.normalize(desc_a, dim=1),
+        F.normalize(desc_b, dim=1),
+        torch.full((1, 1, h, w), 0.5),
+        flow,
+        mask,
+        None,
+        APSampling(border=8),
+    )
     loss.backward()
     assert desc_a.grad.abs().sum() > 0 and desc_b.grad.abs().sum() > 0
 
@@ -108,8 +115,9 @@ def test_collapsed_reliability_stops_descriptor_learning_unless_ap_is_weighted_i
     desc_b = torch.randn(1, 8, h, w)
     flow, mask = _shift_flow(h, w, 0, 0)
     rel = torch.zeros(1, 1, h, w)
-    loss, ap = reliability_ap_loss(F.normalize(desc_a, dim=1), F.normalize(desc_b, dim=1), rel, flow, mask,
-                                   None, APSampling(border=8))
+    loss, ap = reliability_ap_loss(
+        F.normalize(desc_a, dim=1), F.normalize(desc_b, dim=1), rel, flow, mask, None, APSampling(border=8)
+    )
     (grad,) = torch.autograd.grad(loss, desc_a, retain_graph=True)
     assert grad.abs().max() == 0
     (grad,) = torch.autograd.grad(loss + 0.25 * (1 - ap), desc_a)

@@ -73,8 +73,9 @@ def test_a_resumed_run_takes_the_precision_of_the_machine_it_continues_on(photos
     assert json.loads((tmp_path / "config.json").read_text())["precision"] == "fp32"
 
 
-@pytest.mark.parametrize("name, expected", [("channels_last", torch.channels_last),
-                                            ("contiguous", torch.contiguous_format)])
+@pytest.mark.parametrize(
+    "name, expected", [("channels_last", torch.channels_last), ("contiguous", torch.contiguous_format)]
+)
 def test_training_memory_format_by_name(name, expected):
     assert training_memory_format("cpu", name) is expected
 

@@ -82,8 +82,9 @@ def noise_levels(sigmas: list[float], specs: list[str], motion: MotionRange = Mo
     return levels + [NoiseLevel(spec + suffix, noise_from_spec(spec), motion) for spec in specs]
 
 
-def protocol_burst(image: np.ndarray, sequence: str, index: int, level: NoiseLevel, frames: int = 5,
-                   max_shift: float = 3.0) -> tuple[np.ndarray, BurstMotion]:
+def protocol_burst(
+    image: np.ndarray, sequence: str, index: int, level: NoiseLevel, frames: int = 5, max_shift: float = 3.0
+) -> tuple[np.ndarray, BurstMotion]:
     """The benchmark's burst of ``image`` and its in-burst motion (see the module docstring)."""
     rng = np.random.default_rng(stable_seed(sequence, index, level.label))
     m = level.motion
@@ -102,8 +103,9 @@ def oracle_merge(burst: np.ndarray, motion: BurstMotion) -> np.ndarray:
     count = np.zeros((h, w, 1), np.float32)
     for i, k in enumerate(range(-(n // 2), n // 2 + 1)):
         p = motion.frame_points(k, (w, h))
-        total += cv2.remap(burst[i].astype(np.float32), p[..., 0], p[..., 1], cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_REPLICATE)
+        total += cv2.remap(
+            burst[i].astype(np.float32), p[..., 0], p[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+        )
         count += ((p[..., 0] >= 0) & (p[..., 0] <= w - 1) & (p[..., 1] >= 0) & (p[..., 1] <= h - 1))[..., None]
     return total / np.maximum(count, 1)
 
@@ -116,9 +118,9 @@ class MethodRunner:
 
         self.spec = spec
         if spec.startswith("gold:"):
-            self.mode, prefix, inner = "gold", "gold:", "r2d2:" + spec[len("gold:"):]
+            self.mode, prefix, inner = "gold", "gold:", "r2d2:" + spec[len("gold:") :]
         elif spec.startswith("oracle-merge+"):
-            self.mode, prefix, inner = "oracle", "oracle-merge+", spec[len("oracle-merge+"):]
+            self.mode, prefix, inner = "oracle", "oracle-merge+", spec[len("oracle-merge+") :]
         else:
             self.mode, prefix, inner = "burst", "", spec
         options = {"top_k": top_k} if accepts(inner, "top_k") else {}
@@ -153,8 +155,9 @@ def burst_sha1(image: np.ndarray, burst: np.ndarray, motion: BurstMotion) -> str
     return digest.hexdigest()
 
 
-def stored_features(runner: MethodRunner, path: Path, source: Path, image: np.ndarray, burst: np.ndarray,
-                    motion: BurstMotion) -> tuple[Features, float]:
+def stored_features(
+    runner: MethodRunner, path: Path, source: Path, image: np.ndarray, burst: np.ndarray, motion: BurstMotion
+) -> tuple[Features, float]:
     """The runner's features of one burst and the seconds they took: from the store at ``path``
     when it holds them under the same key, else computed and stored.  Either way they are
     returned as stored, so a rerun gives the same numbers."""
@@ -211,9 +214,18 @@ def summarize(per_pair: dict[str, list[dict]], seconds: dict[str, float], kinds:
     return out
 
 
-def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[float], out: str | Path,
-                             noise_specs: list[str] = (), max_side: int | None = None, top_k: int = 5000,
-                             progress: bool = True, motion: MotionRange = MotionRange(), matcher: str = "mnn") -> dict:
+def run_homography_benchmark(
+    data: str | Path,
+    methods: list[str],
+    sigmas: list[float],
+    out: str | Path,
+    noise_specs: list[str] = (),
+    max_side: int | None = None,
+    top_k: int = 5000,
+    progress: bool = True,
+    motion: MotionRange = MotionRange(),
+    matcher: str = "mnn",
+) -> dict:
     """Run the protocol, matching with the ``matcher`` spec; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``."""
     from lburst.matching import create
 
@@ -222,10 +234,19 @@ def run_homography_benchmark(data: str | Path, methods: list[str], sigmas: list[
     folders = list_sequences(data)
     levels = noise_levels(list(sigmas), list(noise_specs), motion)
     runners = {spec: MethodRunner(spec, top_k) for spec in methods}
-    results: dict = {"protocol": {"data": str(data), "sigmas": list(sigmas), "noise_specs": list(noise_specs),
-                                  "max_side": max_side, "top_k": top_k, "thresholds": list(THRESHOLDS),
-                                  "burst_motion": asdict(motion), "matcher": matcher},
-                     "methods": {}}
+    results: dict = {
+        "protocol": {
+            "data": str(data),
+            "sigmas": list(sigmas),
+            "noise_specs": list(noise_specs),
+            "max_side": max_side,
+            "top_k": top_k,
+            "thresholds": list(THRESHOLDS),
+            "burst_motion": asdict(motion),
+            "matcher": matcher,
+        },
+        "methods": {},
+    }
     bar = tqdm(total=len(levels) * len(folders) * len(methods) * 6, desc="homography bench", disable=not progress)
     sequences = {f.name: read_sequence(f, max_side) for f in folders}
     paths = {f.name: f for f in folders}
@@ -261,22 +282,33 @@ def _row(spec: str, s: dict) -> str:
         return f"| {spec} | - | - | - | - | - | - | - | - | - |"
     m = s["mma"]
     secs = f"{s['seconds']:.2f}" if "seconds" in s else "-"
-    return (f"| {spec} | {m[0]:.3f} | {m[2]:.3f} | {m[4]:.3f} | {m[9]:.3f} | {s['rep3']:.3f} | "
-            f"{s['matching_score']:.3f} | {s['keypoints']:.0f} | {s['matches']:.0f} | {secs} |")
+    return (
+        f"| {spec} | {m[0]:.3f} | {m[2]:.3f} | {m[4]:.3f} | {m[9]:.3f} | {s['rep3']:.3f} | "
+        f"{s['matching_score']:.3f} | {s['keypoints']:.0f} | {s['matches']:.0f} | {secs} |"
+    )
 
 
 def markdown(results: dict) -> str:
     """Tables per noise level: all pairs, split by kind, and pairs rotated <= 25 degrees."""
-    head = ("| method | MMA@1 | MMA@3 | MMA@5 | MMA@10 | rep@3 | match. score | #kpts | #matches | s/image |\n"
-            "|---|---|---|---|---|---|---|---|---|---|")
+    head = (
+        "| method | MMA@1 | MMA@3 | MMA@5 | MMA@10 | rep@3 | match. score | #kpts | #matches | s/image |\n"
+        "|---|---|---|---|---|---|---|---|---|---|"
+    )
     methods = results["methods"]
     levels = list(next(iter(methods.values())).keys()) if methods else []
     lines = []
     for level in levels:
         first = methods[next(iter(methods))][level]["summary"]
-        for part, title in [("all", "all pairs, mean over sequences")] + [
-            (k, f"{k} sequences") for k in ("viewpoint", "illumination") if k in first
-        ] + [("rotation_le_25", f"pairs rotated <= {MAX_ROTATION_DEG:g} deg (pooled, {first['rotation_le_25'].get('pairs', 0)} pairs)")]:
+        for part, title in (
+            [("all", "all pairs, mean over sequences")]
+            + [(k, f"{k} sequences") for k in ("viewpoint", "illumination") if k in first]
+            + [
+                (
+                    "rotation_le_25",
+                    f"pairs rotated <= {MAX_ROTATION_DEG:g} deg (pooled, {first['rotation_le_25'].get('pairs', 0)} pairs)",
+                )
+            ]
+        ):
             lines += [f"### {level}: {title}", "", head]
             lines += [_row(spec, methods[spec][level]["summary"][part]) for spec in methods]
             lines.append("")

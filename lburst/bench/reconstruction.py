@@ -37,8 +37,9 @@ def evaluate(result, reference: Path) -> None:
     """Replace ``result``'s reference metrics by those against ``reference`` (a ``reference.json``) and save it."""
     from lburst.sfm.metrics import evaluate_against_reference
 
-    result.metrics = {k: v for k, v in result.metrics.items()
-                      if k not in REFERENCE_KEYS and not k.startswith(("ate_", "rpe_"))}
+    result.metrics = {
+        k: v for k, v in result.metrics.items() if k not in REFERENCE_KEYS and not k.startswith(("ate_", "rpe_"))
+    }
     result.metrics.update(evaluate_against_reference(result, reference))
     result.save()
 
@@ -48,15 +49,19 @@ def scene_sha1(scene: Path) -> str:
     scene folder (paths and bytes) except its ``reference.json``, which is evaluated, not run."""
     if scene.is_file():
         return files_sha1([scene])
-    files = sorted(p for p in scene.rglob("*") if p.is_file() and p.relative_to(scene) != Path(REFERENCE_FILE)
-                   and not any(part.startswith(".") for part in p.relative_to(scene).parts))
+    files = sorted(
+        p
+        for p in scene.rglob("*")
+        if p.is_file()
+        and p.relative_to(scene) != Path(REFERENCE_FILE)
+        and not any(part.startswith(".") for part in p.relative_to(scene).parts)
+    )
     return files_sha1(files, root=scene)
 
 
 def run_key(scene: Path, options: dict[str, Any]) -> dict[str, Any]:
     """What a finished run depends on besides the method: the scene's content and the options."""
-    return {"scene": scene_sha1(scene),
-            "options": {k: str(v) for k, v in sorted(options.items()) if k != "progress"}}
+    return {"scene": scene_sha1(scene), "options": {k: str(v) for k, v in sorted(options.items()) if k != "progress"}}
 
 
 def _stored_key(out: Path) -> dict[str, Any] | None:
@@ -76,11 +81,17 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
     if done.is_file() and not force:
         previous = ReconstructionResult.load(done)
         stored = _stored_key(out) if (out / KEY_FILE).exists() else key
-        if (previous.method == spec and previous.metrics.get("matcher", "mnn") == options.get("matcher", "mnn")
-                and stored == key):
+        if (
+            previous.method == spec
+            and previous.metrics.get("matcher", "mnn") == options.get("matcher", "mnn")
+            and stored == key
+        ):
             reference = scene / REFERENCE_FILE
-            if (reference.is_file() and not previous.error
-                    and previous.metrics.get("reference_sha1") != file_sha1(reference)):
+            if (
+                reference.is_file()
+                and not previous.error
+                and previous.metrics.get("reference_sha1") != file_sha1(reference)
+            ):
                 evaluate(previous, reference)  # reference added or remade since
             return {**row, **previous.metrics, "registered": len(previous.registered), "error": previous.error}
     try:
@@ -95,8 +106,9 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
     return {**row, **result.metrics, "registered": len(result.registered), "error": result.error}
 
 
-def run_benchmark(scenes: list[str | Path], methods: list[str], out_dir: str | Path, force: bool = False,
-                  **options: Any) -> dict[str, Any]:
+def run_benchmark(
+    scenes: list[str | Path], methods: list[str], out_dir: str | Path, force: bool = False, **options: Any
+) -> dict[str, Any]:
     """Run every method on every scene; return ``{"rows": [...], "means": [...]}`` (also written to ``OUT/results.json``)."""
     from lburst.sfm.metrics import aggregate
 
@@ -106,8 +118,10 @@ def run_benchmark(scenes: list[str | Path], methods: list[str], out_dir: str | P
         folder = out_dir / method_slug(results_key(spec))  # hashes the weights once per method
         for scene in map(Path, scenes):
             rows.append(run_one(scene, spec, folder / scene.name, force, options))
-    means = [{"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
-             for spec in methods]
+    means = [
+        {"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
+        for spec in methods
+    ]
     report = {"scenes": [str(s) for s in scenes], "methods": methods, "options": options, "rows": rows, "means": means}
     with atomic_path(out_dir / "results.json") as tmp:
         tmp.write_text(json.dumps(report, indent=1))

@@ -28,7 +28,11 @@ class Sequence:
 
 
 def _find_image(folder: Path, stem: str) -> Path:
-    hits = sorted(p for p in folder.glob(f"{stem}.*") if p.suffix.lower() in (".png", ".ppm", ".jpg", ".jpeg", ".pgm", ".tif", ".tiff"))
+    hits = sorted(
+        p
+        for p in folder.glob(f"{stem}.*")
+        if p.suffix.lower() in (".png", ".ppm", ".jpg", ".jpeg", ".pgm", ".tif", ".tiff")
+    )
     if not hits:
         raise FileNotFoundError(f"{folder}: no image {stem}.png/.ppm/...")
     return hits[0]

@@ -80,8 +80,13 @@ def make_sequence(photo: np.ndarray, kind: str, rng: np.random.Generator) -> tup
         if kind == "v":
             hk = viewpoint_homography(rng, (w, h))
             # image K at q shows the photo at to_photo @ inv(hk) @ q
-            img = cv2.warpPerspective(photo, to_photo @ np.linalg.inv(hk), (w, h),
-                                      flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT)
+            img = cv2.warpPerspective(
+                photo,
+                to_photo @ np.linalg.inv(hk),
+                (w, h),
+                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                borderMode=cv2.BORDER_CONSTANT,
+            )
         else:
             hk = np.eye(3)
             img = illumination_change(first, rng)
@@ -109,8 +114,11 @@ def make_validation_sequences(photos: list[Path], out: str | Path, seed: int = 0
         for k, hk in enumerate(homographies, 2):  # written last: a sequence with H1to6p is complete
             with atomic_path(folder / f"H1to{k}p") as tmp:
                 np.savetxt(tmp, hk, fmt="%.10g")
-    manifest = {"photos": [str(p) for p in photos], "seed": seed,
-                "rule": "lburst.train.data.is_validation_photo: CRC-32 of the file stem divisible by 10"}
+    manifest = {
+        "photos": [str(p) for p in photos],
+        "seed": seed,
+        "rule": "lburst.train.data.is_validation_photo: CRC-32 of the file stem divisible by 10",
+    }
     with atomic_path(out / "manifest.json") as tmp:
         tmp.write_text(json.dumps(manifest, indent=1))
     return folders

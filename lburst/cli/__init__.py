@@ -62,8 +62,12 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        if (action.default in (None, False, argparse.SUPPRESS) or "default" in text or "%(default)" in text
-                or (not action.option_strings and action.nargs not in ("?", "*"))):
+        if (
+            action.default in (None, False, argparse.SUPPRESS)
+            or "default" in text
+            or "%(default)" in text
+            or (not action.option_strings and action.nargs not in ("?", "*"))
+        ):
             return text
         return f"{text} (default: %(default)s)"
 
@@ -87,8 +91,9 @@ def _fill_help(parser: argparse.ArgumentParser) -> None:
 
 def build_parser(load: tuple[str, ...] | None = None) -> argparse.ArgumentParser:
     """The parser; only the subcommand ``load`` has its module imported for its options."""
-    parser = argparse.ArgumentParser(prog="lburst", description="Features from low-light robotic bursts.",
-                                     formatter_class=HelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="lburst", description="Features from low-light robotic bursts.", formatter_class=HelpFormatter
+    )
     parser.add_argument("--version", action="version", version=f"lburst {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     groups: dict[str, argparse._SubParsersAction] = {}
@@ -159,4 +164,3 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted; finished work is kept and a re-run resumes", file=sys.stderr)
         return 130
-

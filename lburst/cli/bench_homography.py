@@ -18,19 +18,40 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-side", type=int)
     p.add_argument("--top-k", type=int, default=5000)
     p.add_argument("--out", type=Path, default=Path("outputs/homography"))
-    p.add_argument("--burst-rotation", type=float, default=0.0, metavar="DEG",
-                   help="largest in-burst rotation per frame (degrees; 0: translation only)")
-    p.add_argument("--burst-zoom", type=float, default=0.0, metavar="Z", help="largest in-burst zoom per frame (0.01: 1%%)")
-    p.add_argument("--burst-flow", type=float, default=0.0, metavar="PX",
-                   help="largest std of the smooth non-uniform in-burst flow per frame (pixels)")
+    p.add_argument(
+        "--burst-rotation",
+        type=float,
+        default=0.0,
+        metavar="DEG",
+        help="largest in-burst rotation per frame (degrees; 0: translation only)",
+    )
+    p.add_argument(
+        "--burst-zoom", type=float, default=0.0, metavar="Z", help="largest in-burst zoom per frame (0.01: 1%%)"
+    )
+    p.add_argument(
+        "--burst-flow",
+        type=float,
+        default=0.0,
+        metavar="PX",
+        help="largest std of the smooth non-uniform in-burst flow per frame (pixels)",
+    )
     add_matcher_argument(p)
 
 
 def main(args: argparse.Namespace) -> int:
     try:
         motion = MotionRange(args.burst_rotation, args.burst_zoom, args.burst_flow)
-        results = run_homography_benchmark(args.data, args.methods, args.sigma, args.out, args.noise,
-                                           args.max_side, args.top_k, motion=motion, matcher=args.matcher)
+        results = run_homography_benchmark(
+            args.data,
+            args.methods,
+            args.sigma,
+            args.out,
+            args.noise,
+            args.max_side,
+            args.top_k,
+            motion=motion,
+            matcher=args.matcher,
+        )
     except (FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -28,10 +28,20 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     from lburst.sfm.metrics import markdown_table
 
-    report = run_benchmark(args.scenes, args.methods, args.out, force=args.force, pairs=args.pairs,
-                           overlap=args.overlap, fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
-                           camera=args.camera, single_camera=args.single_camera, num_threads=args.threads,
-                           matcher=args.matcher)
+    report = run_benchmark(
+        args.scenes,
+        args.methods,
+        args.out,
+        force=args.force,
+        pairs=args.pairs,
+        overlap=args.overlap,
+        fallback_exhaustive=args.fallback_exhaustive,
+        mapper=args.mapper,
+        camera=args.camera,
+        single_camera=args.single_camera,
+        num_threads=args.threads,
+        matcher=args.matcher,
+    )
     table = markdown_table(report["rows"] + report["means"])
     with atomic_path(Path(args.out) / "table.md") as tmp:
         tmp.write_text(table + "\n")

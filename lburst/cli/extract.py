@@ -52,26 +52,38 @@ def method_spec(method: str | None, weights: str | None, frame_order: str | None
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("bursts", nargs="+", type=Path,
-                   help="burst folders, images or videos (a whole video is one burst unless --every is given), "
-                        "or recordings: features of each keyframe burst go to OUT/<recording>/<keyframe>.npz")
+    p.add_argument(
+        "bursts",
+        nargs="+",
+        type=Path,
+        help="burst folders, images or videos (a whole video is one burst unless --every is given), "
+        "or recordings: features of each keyframe burst go to OUT/<recording>/<keyframe>.npz",
+    )
     p.add_argument("--out", type=Path, required=True, help="output folder for <burst>.npz")
     p.add_argument("--weights", help="checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
     p.add_argument("--method", help="any method spec, e.g. sift, orb, merge+sift, buff (default: lburst)")
-    p.add_argument("--frame-order", choices=["temporal", "published"],
-                   help="frame order for burst networks ('published' for the published LBurst weights)")
+    p.add_argument(
+        "--frame-order",
+        choices=["temporal", "published"],
+        help="frame order for burst networks ('published' for the published LBurst weights)",
+    )
     p.add_argument("--top-k", type=int, default=4000, help="keypoints per burst (learned methods)")
     p.add_argument("--h5", action="store_true", help="also write an hloc-style features.h5 in --out")
     p.add_argument("--overwrite", action="store_true", help="recompute bursts that are already done")
     p.add_argument("--device", help="cpu or cuda (default: cuda if available)")
-    p.add_argument("--precision", choices=list(AUTOCAST_DTYPES), default="fp32",
-                   help="backbone precision of learned methods: bf16 is faster on CPUs with AVX512-BF16 or AMX "
-                        "(heads stay fp32; about 99%% of keypoints within 1 px of fp32), fp16 on a GPU")
+    p.add_argument(
+        "--precision",
+        choices=list(AUTOCAST_DTYPES),
+        default="fp32",
+        help="backbone precision of learned methods: bf16 is faster on CPUs with AVX512-BF16 or AMX "
+        "(heads stay fp32; about 99%% of keypoints within 1 px of fp32), fp16 on a GPU",
+    )
     add_recording_arguments(p)
 
 
-def extract_recording(path: Path, extractor, args: argparse.Namespace, method: dict,
-                      finished: list[tuple[str, Path]]) -> tuple[int, int, str | None]:
+def extract_recording(
+    path: Path, extractor, args: argparse.Namespace, method: dict, finished: list[tuple[str, Path]]
+) -> tuple[int, int, str | None]:
     """Features of every keyframe burst of a recording, one ``.npz`` each in ``OUT/<recording>/``;
     returns (extracted, already done, why reading stopped or ``None``) and appends the
     finished keyframes to ``finished``.  Keyframes finished before a bad frame are kept."""
@@ -109,8 +121,9 @@ def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
             write_features_h5(tmp, group, features, tuple(int(v) for v in features["imsize"]))
 
 
-def extract_burst(path: Path, extractor, args: argparse.Namespace, method: dict,
-                  names: dict[str, Path]) -> tuple[str, Path, bool]:
+def extract_burst(
+    path: Path, extractor, args: argparse.Namespace, method: dict, names: dict[str, Path]
+) -> tuple[str, Path, bool]:
     """Features of one burst into ``OUT/<name>.npz``: (name, file, whether computed now).
     ``BurstError`` when the name is taken by another burst (in this run or on disk)."""
     if not path.exists():
@@ -119,16 +132,19 @@ def extract_burst(path: Path, extractor, args: argparse.Namespace, method: dict,
     target = args.out / f"{name}.npz"
     here = Path(os.path.abspath(path))
     if names.setdefault(name, here) != here:
-        raise BurstError(f"{path}: same output name {name!r} as {names[name]} in this run; "
-                         f"extract one of them into another --out")
+        raise BurstError(
+            f"{path}: same output name {name!r} as {names[name]} in this run; extract one of them into another --out"
+        )
     key = store.burst_key(method, path)
     if target.exists() and not args.overwrite:
         if store.load(target, key) is not None:
             return name, target, False
         meta = store.read_meta(target)
         if not store.same_source(meta, key):
-            raise BurstError(f"{path}: {target} holds the features of another burst with the same name "
-                             f"({meta['key']['source']['path']}); use another --out, or --overwrite to replace them")
+            raise BurstError(
+                f"{path}: {target} holds the features of another burst with the same name "
+                f"({meta['key']['source']['path']}); use another --out, or --overwrite to replace them"
+            )
     burst = load_burst(path)
     store.save(target, extractor(burst), (burst.shape[2], burst.shape[1]), key)
     return name, target, True
@@ -138,8 +154,11 @@ def main(args: argparse.Namespace) -> int:
     spec = method_spec(args.method, args.weights, args.frame_order)
     options = {}
     try:
-        wanted = {"top_k": str(args.top_k), "device": args.device,
-                  "precision": args.precision if args.precision != "fp32" else None}
+        wanted = {
+            "top_k": str(args.top_k),
+            "device": args.device,
+            "precision": args.precision if args.precision != "fp32" else None,
+        }
         options = {k: v for k, v in wanted.items() if v is not None and accepts(spec, k)}  # learned methods have them
         extractor = create(spec, **options)
     except (CheckpointError, FileNotFoundError, ValueError) as exc:
@@ -176,8 +195,10 @@ def main(args: argparse.Namespace) -> int:
         done += computed
     if args.h5:
         write_h5(args.out / "features.h5", finished)
-    print(f"{done} bursts extracted to {args.out}, {len(args.bursts) - done - len(failed)} already done, "
-          f"{len(failed)} failed")
+    print(
+        f"{done} bursts extracted to {args.out}, {len(args.bursts) - done - len(failed)} already done, "
+        f"{len(failed)} failed"
+    )
     for path, why in failed:
         print(f"  failed: {path}: {why}", file=sys.stderr)
     return 1 if failed else 0

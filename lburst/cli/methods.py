@@ -28,8 +28,11 @@ def listing(name: str | None = None) -> str:
     out = ["Feature methods (--method SPEC: NAME[:ARG][,KEY=VALUE...]; a wrapper: NAME[,KEY=VALUE]+SPEC):"]
     for info in methods.methods():
         if name in (None, info.name):
-            form = f"{info.name}[,KEY=VALUE...]+SPEC" if info.wraps else \
-                info.name + (f"[:{info.arg.upper()}]" if info.arg else "") + "[,KEY=VALUE...]"
+            form = (
+                f"{info.name}[,KEY=VALUE...]+SPEC"
+                if info.wraps
+                else info.name + (f"[:{info.arg.upper()}]" if info.arg else "") + "[,KEY=VALUE...]"
+            )
             out += _entry(form, info.summary, info.options)
     out += ["", "Matchers (--matcher SPEC: NAME[,KEY=VALUE...]):"]
     for info in matching.available():

@@ -12,21 +12,41 @@ def add_recording_arguments(p) -> None:
     """The command-line options of :class:`RecordingOptions` (for commands that read recordings);
     ``--every`` stays ``None`` when not given (:func:`recording_options` reads it as 10)."""
     g = p.add_argument_group("recordings (a video, or a folder of consecutive frames or DNGs, with a meta.json)")
-    g.add_argument("--burst", dest="burst_frames", type=int, default=5, help="frames per burst, odd, centred on each keyframe (default 5)")
+    g.add_argument(
+        "--burst",
+        dest="burst_frames",
+        type=int,
+        default=5,
+        help="frames per burst, odd, centred on each keyframe (default 5)",
+    )
     g.add_argument("--every", type=int, help="a keyframe every this many frames (default 10)")
     g.add_argument("--start", type=int, default=0, help="frame index of the first keyframe (default 0)")
-    g.add_argument("--fps", type=float, help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})")
-    g.add_argument("--raw-gain", default="auto",
-                   help="linear 16-bit frames: 'auto' (the first burst's mean, binned 4x4: its 99.5th luminance "
-                        "percentile to 0.8, then 8 bit), 'none' (keep linear), or a fixed gain")
-    g.add_argument("--raw-curve", choices=("linear", "srgb"), default="linear",
-                   help="tone curve after the gain (default linear, as the networks' training noise)")
+    g.add_argument(
+        "--fps", type=float, help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})"
+    )
+    g.add_argument(
+        "--raw-gain",
+        default="auto",
+        help="linear 16-bit frames: 'auto' (the first burst's mean, binned 4x4: its 99.5th luminance "
+        "percentile to 0.8, then 8 bit), 'none' (keep linear), or a fixed gain",
+    )
+    g.add_argument(
+        "--raw-curve",
+        choices=("linear", "srgb"),
+        default="linear",
+        help="tone curve after the gain (default linear, as the networks' training noise)",
+    )
 
 
 def recording_options(args) -> RecordingOptions:
     """:class:`RecordingOptions` from :func:`add_recording_arguments`' options (``ValueError`` if bad)."""
-    return RecordingOptions(burst=args.burst_frames, every=args.every or 10, start=args.start, fps=args.fps,
-                            normalisation=Normalisation(gain=args.raw_gain, curve=args.raw_curve))
+    return RecordingOptions(
+        burst=args.burst_frames,
+        every=args.every or 10,
+        start=args.start,
+        fps=args.fps,
+        normalisation=Normalisation(gain=args.raw_gain, curve=args.raw_curve),
+    )
 
 
 def matcher_spec(spec: str) -> str:
@@ -42,6 +62,10 @@ def matcher_spec(spec: str) -> str:
 def add_matcher_argument(parser) -> None:
     """``--matcher SPEC`` on a command's parser, checked before the command starts."""
     names = ", ".join(m.name for m in available())
-    parser.add_argument("--matcher", type=matcher_spec, default=DEFAULT,
-                        help=f"how to match descriptors: {names}, with options as NAME,KEY=VALUE "
-                             f"(default {DEFAULT}; `lburst methods` lists them)")
+    parser.add_argument(
+        "--matcher",
+        type=matcher_spec,
+        default=DEFAULT,
+        help=f"how to match descriptors: {names}, with options as NAME,KEY=VALUE "
+        f"(default {DEFAULT}; `lburst methods` lists them)",
+    )

@@ -13,41 +13,73 @@ from lburst.sources import is_recording
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", help="scene folder (one sub-folder of frames per burst, or single images), "
-                                      "or a recording: a video, or a folder of DNG frames")
-    parser.add_argument("--method", default="lburst", help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...)")
+    parser.add_argument(
+        "scene",
+        help="scene folder (one sub-folder of frames per burst, or single images), "
+        "or a recording: a video, or a folder of DNG frames",
+    )
+    parser.add_argument(
+        "--method", default="lburst", help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...)"
+    )
     parser.add_argument("--out", required=True, help="output folder (features cache, COLMAP files, result.json)")
-    parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto",
-                        help=f"image pairs to match (auto: exhaustive up to {AUTO_EXHAUSTIVE_MAX} images)")
+    parser.add_argument(
+        "--pairs",
+        choices=("auto", "exhaustive", "sequential"),
+        default="auto",
+        help=f"image pairs to match (auto: exhaustive up to {AUTO_EXHAUSTIVE_MAX} images)",
+    )
     parser.add_argument("--overlap", type=int, default=10, help="sequential pairs: neighbours on each side")
-    parser.add_argument("--fallback-exhaustive", action="store_true",
-                        help="rerun with all pairs when sequential pairs leave images unregistered")
+    parser.add_argument(
+        "--fallback-exhaustive",
+        action="store_true",
+        help="rerun with all pairs when sequential pairs leave images unregistered",
+    )
     parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
-    parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto",
-                        help="intrinsics prior: EXIF or default (auto), default, or the scene's reference.json")
+    parser.add_argument(
+        "--camera",
+        choices=("auto", "default", "reference"),
+        default="auto",
+        help="intrinsics prior: EXIF or default (auto), default, or the scene's reference.json",
+    )
     parser.add_argument("--camera-model", default="SIMPLE_RADIAL")
-    parser.add_argument("--single-camera", action="store_true",
-                        help="one camera for all images (when their priors agree) instead of one per image")
+    parser.add_argument(
+        "--single-camera",
+        action="store_true",
+        help="one camera for all images (when their priors agree) instead of one per image",
+    )
     parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     add_matcher_argument(parser)
-    parser.add_argument("--retrieval", type=int,
-                        help="sequential pairs: also match each image with its N most similar images farther apart "
-                             "(loop closure; default 5 for a recording, 0 for a scene)")
+    parser.add_argument(
+        "--retrieval",
+        type=int,
+        help="sequential pairs: also match each image with its N most similar images farther apart "
+        "(loop closure; default 5 for a recording, 0 for a scene)",
+    )
     add_recording_arguments(parser)
 
 
 def main(args: argparse.Namespace) -> int:
     try:
-        result = reconstruct_scene(args.scene, args.method, args.out, pairs=args.pairs, overlap=args.overlap,
-                                   fallback_exhaustive=args.fallback_exhaustive, mapper=args.mapper,
-                                   camera=args.camera, camera_model=args.camera_model,
-                                   single_camera=args.single_camera, fix_intrinsics=args.fix_intrinsics,
-                                   num_threads=args.threads, seed=args.seed, matcher=args.matcher,
-                                   retrieval=args.retrieval if args.retrieval is not None else
-                                   (5 if is_recording(args.scene) else 0),
-                                   recording=recording_options(args))
+        result = reconstruct_scene(
+            args.scene,
+            args.method,
+            args.out,
+            pairs=args.pairs,
+            overlap=args.overlap,
+            fallback_exhaustive=args.fallback_exhaustive,
+            mapper=args.mapper,
+            camera=args.camera,
+            camera_model=args.camera_model,
+            single_camera=args.single_camera,
+            fix_intrinsics=args.fix_intrinsics,
+            num_threads=args.threads,
+            seed=args.seed,
+            matcher=args.matcher,
+            retrieval=args.retrieval if args.retrieval is not None else (5 if is_recording(args.scene) else 0),
+            recording=recording_options(args),
+        )
     except (ReconstructionError, ValueError) as err:
         print(f"lburst reconstruct: {err}", file=sys.stderr)
         return 1
@@ -62,7 +94,9 @@ def main(args: argparse.Namespace) -> int:
         return 1
     print(f"{len(result.registered)}/{len(result.names)} images registered; model in {Path(args.out) / 'colmap'}")
     if result.source_error:
-        print(f"lburst reconstruct: {result.source_error} (the {len(result.names)} keyframes before it were used)",
-              file=sys.stderr)
+        print(
+            f"lburst reconstruct: {result.source_error} (the {len(result.names)} keyframes before it were used)",
+            file=sys.stderr,
+        )
         return 1
     return 0

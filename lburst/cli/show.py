@@ -14,8 +14,12 @@ from lburst.viz import plot_keypoints_and_maps
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("burst", type=Path, help="burst folder, image or video, or a recording (video, or a folder of "
-                                            "frames or DNGs with meta.json): then the burst centred on --frame")
+    p.add_argument(
+        "burst",
+        type=Path,
+        help="burst folder, image or video, or a recording (video, or a folder of "
+        "frames or DNGs with meta.json): then the burst centred on --frame",
+    )
     p.add_argument("--frame", type=int, help="recording: the keyframe's frame index (a video without it is one burst)")
     p.add_argument("--frames", type=int, default=5, help="recording: frames in the burst (odd, default 5)")
     p.add_argument("--weights", help="checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
@@ -63,7 +67,13 @@ def main(args: argparse.Namespace) -> int:
     features = model.extract(burst, top_k=args.top_k)
     dense = model.dense(burst)
     out = args.out or Path(f"{burst_name(args.burst)}_keypoints.png")
-    plot_keypoints_and_maps(burst[len(burst) // 2], features["keypoints"], dense["repeatability"],
-                            dense["reliability"], out, title=f"{args.burst}")
+    plot_keypoints_and_maps(
+        burst[len(burst) // 2],
+        features["keypoints"],
+        dense["repeatability"],
+        dense["reliability"],
+        out,
+        title=f"{args.burst}",
+    )
     print(f"wrote {out}")
     return 0

@@ -22,9 +22,17 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("image", nargs="?", type=Path, help="photo (default: scikit-image's astronaut)")
     p.add_argument("--out", type=Path, required=True, help="folder for frame_000.png ...")
     p.add_argument("--frames", type=int, default=5)
-    p.add_argument("--motion", type=float, nargs=2, default=(2.0, 1.0), metavar=("DX", "DY"),
-                   help="apparent motion per frame, pixels")
-    p.add_argument("--noise", default="gaussian:50", help="none, gaussian:STD, gaussian-var:V, lowlight:PHOTONS|night|...")
+    p.add_argument(
+        "--motion",
+        type=float,
+        nargs=2,
+        default=(2.0, 1.0),
+        metavar=("DX", "DY"),
+        help="apparent motion per frame, pixels",
+    )
+    p.add_argument(
+        "--noise", default="gaussian:50", help="none, gaussian:STD, gaussian-var:V, lowlight:PHOTONS|night|..."
+    )
     p.add_argument("--seed", type=int, default=0)
 
 

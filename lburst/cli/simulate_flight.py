@@ -14,13 +14,22 @@ from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
 def configure_parser(p: argparse.ArgumentParser) -> None:
     """Options of a ``lburst simulate flight``-style command (see :func:`main`)."""
     default = NightFlightConfig()
-    p.add_argument("out_dir", type=Path, nargs="?", metavar="OUT",
-                   help="scene folder of bursts to write (re-running resumes)")
+    p.add_argument(
+        "out_dir", type=Path, nargs="?", metavar="OUT", help="scene folder of bursts to write (re-running resumes)"
+    )
     p.add_argument("--out", type=Path, help="the scene folder OUT, given as an option")
-    p.add_argument("--video", type=Path, help="also (or only) write the flight as a continuous MP4 video, with "
-                                              "per-frame ground truth X.gt.txt (TUM) and X.meta.json (camera, fps)")
-    p.add_argument("--dng", type=Path, help="also (or only) write the flight as a folder of 12-bit Bayer DNG frames "
-                                            "(needs --noise lowlight:...), with gt.txt and meta.json inside")
+    p.add_argument(
+        "--video",
+        type=Path,
+        help="also (or only) write the flight as a continuous MP4 video, with "
+        "per-frame ground truth X.gt.txt (TUM) and X.meta.json (camera, fps)",
+    )
+    p.add_argument(
+        "--dng",
+        type=Path,
+        help="also (or only) write the flight as a folder of 12-bit Bayer DNG frames "
+        "(needs --noise lowlight:...), with gt.txt and meta.json inside",
+    )
     p.add_argument("--crf", type=int, default=16, help="H.264 quality of --video (lower: better; default 16)")
     p.add_argument("--turn", type=float, default=default.turn_deg, help="heading change over the flight, degrees")
     p.add_argument("--loop", action="store_true", help="fly a loop that passes over its start again (--turn 380)")
@@ -48,9 +57,17 @@ def main(args: argparse.Namespace) -> int:
     if args.out is None and args.video is None and args.dng is None:
         print("error: give a scene folder OUT, --video FILE.mp4 or --dng FOLDER", file=sys.stderr)
         return 2
-    kwargs = dict(n_bursts=args.bursts, frames_per_burst=args.frames, width=width, height=height, noise=args.noise,
-                  exposure=args.exposure, supersample=args.supersample, seed=args.seed,
-                  turn_deg=380.0 if args.loop else args.turn)
+    kwargs = dict(
+        n_bursts=args.bursts,
+        frames_per_burst=args.frames,
+        width=width,
+        height=height,
+        noise=args.noise,
+        exposure=args.exposure,
+        supersample=args.supersample,
+        seed=args.seed,
+        turn_deg=380.0 if args.loop else args.turn,
+    )
     try:
         cfg = NightFlightConfig.daylight(**kwargs) if args.daylight else NightFlightConfig(**kwargs)
         if args.out is not None:

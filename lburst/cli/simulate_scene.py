@@ -18,36 +18,59 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise", default="gaussian:50", help="noise spec (lburst.noise), or 'none'")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-reference", action="store_true", help="skip the clean SIFT reconstruction")
-    parser.add_argument("--reference-single-camera", action="store_true",
-                        help="one shared COLMAP camera for all clean photos in the reference reconstruction "
-                             "(when their priors agree), for a set shot with one camera; default: one camera "
-                             "per photo (lund needs this and --reference-fix-intrinsics)")
-    parser.add_argument("--reference-fix-intrinsics", action="store_true",
-                        help="keep the reference cameras at their prior (EXIF focal length, no distortion) "
-                             "instead of refining them; with --reference-single-camera for forward motion (lund)")
-    parser.add_argument("--reference-threads", type=int, default=2,
-                        help="COLMAP threads for the reference reconstruction (its result depends on them)")
+    parser.add_argument(
+        "--reference-single-camera",
+        action="store_true",
+        help="one shared COLMAP camera for all clean photos in the reference reconstruction "
+        "(when their priors agree), for a set shot with one camera; default: one camera "
+        "per photo (lund needs this and --reference-fix-intrinsics)",
+    )
+    parser.add_argument(
+        "--reference-fix-intrinsics",
+        action="store_true",
+        help="keep the reference cameras at their prior (EXIF focal length, no distortion) "
+        "instead of refining them; with --reference-single-camera for forward motion (lund)",
+    )
+    parser.add_argument(
+        "--reference-threads",
+        type=int,
+        default=2,
+        help="COLMAP threads for the reference reconstruction (its result depends on them)",
+    )
 
 
 def main(args: argparse.Namespace) -> int:
     from lburst.sfm.reconstruct import ReconstructionError
 
     try:
-        ref = simulate_scene(args.photos, args.out, args.frames, args.motion_px, args.noise, args.seed,
-                             reference=not args.no_reference,
-                             reference_options={"single_camera": args.reference_single_camera,
-                                                "fix_intrinsics": args.reference_fix_intrinsics,
-                                                "num_threads": args.reference_threads})
+        ref = simulate_scene(
+            args.photos,
+            args.out,
+            args.frames,
+            args.motion_px,
+            args.noise,
+            args.seed,
+            reference=not args.no_reference,
+            reference_options={
+                "single_camera": args.reference_single_camera,
+                "fix_intrinsics": args.reference_fix_intrinsics,
+                "num_threads": args.reference_threads,
+            },
+        )
     except (SceneError, ReconstructionError, ValueError) as err:
         print(f"lburst simulate scene: {err}", file=sys.stderr)
         return 1
     if not args.no_reference:
         if ref is None:
-            print(f"lburst simulate scene: the clean photos did not reconstruct; {args.out} has no reference",
-                  file=sys.stderr)
+            print(
+                f"lburst simulate scene: the clean photos did not reconstruct; {args.out} has no reference",
+                file=sys.stderr,
+            )
             return 1
         total = len([i for i in list_scene(args.photos).items if i.kind == "image"])
-        print(f"reference: {len(ref.poses)}/{total} photos registered ({REFERENCE_SOURCE}) "
-              f"in {Path(args.out) / 'reference.json'}")
+        print(
+            f"reference: {len(ref.poses)}/{total} photos registered ({REFERENCE_SOURCE}) "
+            f"in {Path(args.out) / 'reference.json'}"
+        )
     print(f"scene written to {args.out}")
     return 0

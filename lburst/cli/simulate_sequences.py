@@ -12,11 +12,19 @@ from lburst.paths import shared_dir
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("photos", nargs="*", type=Path,
-                   help="photo folders (default: $LBURST_SHARED/data/train512); only their validation tenth is used")
+    p.add_argument(
+        "photos",
+        nargs="*",
+        type=Path,
+        help="photo folders (default: $LBURST_SHARED/data/train512); only their validation tenth is used",
+    )
     p.add_argument("--out", type=Path, default=Path("data/validation"), help="folder of sequence folders")
-    p.add_argument("--split", choices=("validation", "all"), default="validation",
-                   help="which photos: the held-out tenth (never trained on) or all")
+    p.add_argument(
+        "--split",
+        choices=("validation", "all"),
+        default="validation",
+        help="which photos: the held-out tenth (never trained on) or all",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of every random draw")
     p.set_defaults(_default_photos=shared_dir() / "data" / "train512")
 

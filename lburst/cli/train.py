@@ -14,8 +14,12 @@ from lburst.train.loop import PRESETS, TrainConfig, check_resume_options, train
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
     default_data = os.environ.get("LBURST_TRAIN_DATA")
-    p.add_argument("--data", nargs="+", default=[default_data] if default_data else None,
-                   help="folders of training photos (default: $LBURST_TRAIN_DATA, else $LBURST_SHARED/data/train)")
+    p.add_argument(
+        "--data",
+        nargs="+",
+        default=[default_data] if default_data else None,
+        help="folders of training photos (default: $LBURST_TRAIN_DATA, else $LBURST_SHARED/data/train)",
+    )
     p.add_argument("--out", required=True, help="run folder (checkpoints, log.csv)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="cpu")
     p.add_argument("--frames", type=int, help="burst length N (1 = single-image network)")
@@ -24,17 +28,31 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-budget", type=float, help="stop (resumably) after this many seconds")
     p.add_argument("--workers", type=int)
     p.add_argument("--threads", type=int, help="torch threads")
-    p.add_argument("--checkpoint-every", type=float, metavar="SECONDS",
-                   help="write the resumable last.pt every this many seconds (presets: 300, gpu 60)")
+    p.add_argument(
+        "--checkpoint-every",
+        type=float,
+        metavar="SECONDS",
+        help="write the resumable last.pt every this many seconds (presets: 300, gpu 60)",
+    )
     p.add_argument("--tensorboard", action="store_true", help="also log the losses for TensorBoard (RUN/tensorboard)")
     p.add_argument("--snapshot-every", type=int, help="keep the weights every this many steps (snapshots/)")
     p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
-    p.add_argument("--memory-format", choices=("auto", "channels_last", "contiguous"), default="auto",
-                   help="tensor layout: auto is channels_last on CUDA and AVX-512 CPUs, contiguous on other CPUs")
-    p.add_argument("--rel-logit-weight", type=float,
-                   help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)")
-    p.add_argument("--distill-weight", type=float,
-                   help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)")
+    p.add_argument(
+        "--memory-format",
+        choices=("auto", "channels_last", "contiguous"),
+        default="auto",
+        help="tensor layout: auto is channels_last on CUDA and AVX-512 CPUs, contiguous on other CPUs",
+    )
+    p.add_argument(
+        "--rel-logit-weight",
+        type=float,
+        help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)",
+    )
+    p.add_argument(
+        "--distill-weight",
+        type=float,
+        help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)",
+    )
     p.add_argument("--init", help="start from this checkpoint of our own (e.g. lburst/weights/lburst-b5.pt)")
     p.add_argument("--seed", type=int)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -43,12 +61,22 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 def given_options(args: argparse.Namespace) -> dict:
     """The TrainConfig fields set on the command line (``None``: not given)."""
-    return {"frames": args.frames, "steps": args.steps, "batch_size": args.batch_size,
-                 "time_budget_s": args.time_budget, "workers": args.workers, "threads": args.threads,
-                 "seed": args.seed, "precision": args.precision, "snapshot_every": args.snapshot_every,
-                 "tensorboard": args.tensorboard or None, "rel_logit_weight": args.rel_logit_weight,
-                 "distill_weight": args.distill_weight, "init": args.init,
-                 "checkpoint_every_s": args.checkpoint_every}
+    return {
+        "frames": args.frames,
+        "steps": args.steps,
+        "batch_size": args.batch_size,
+        "time_budget_s": args.time_budget,
+        "workers": args.workers,
+        "threads": args.threads,
+        "seed": args.seed,
+        "precision": args.precision,
+        "snapshot_every": args.snapshot_every,
+        "tensorboard": args.tensorboard or None,
+        "rel_logit_weight": args.rel_logit_weight,
+        "distill_weight": args.distill_weight,
+        "init": args.init,
+        "checkpoint_every_s": args.checkpoint_every,
+    }
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
@@ -70,7 +98,14 @@ def main(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     if args.resume:
         check_resume_options(args.out, given_options(args))
-    last = train(data, args.out, cfg, resume=args.resume, device=args.device, precision=args.precision,
-                 memory_format=args.memory_format)
+    last = train(
+        data,
+        args.out,
+        cfg,
+        resume=args.resume,
+        device=args.device,
+        precision=args.precision,
+        memory_format=args.memory_format,
+    )
     print(f"checkpoint: {last}")
     return 0

@@ -33,8 +33,18 @@ from typing import Any, Callable
 from lburst.features import Extractor
 from lburst.methods.options import parse_options
 
-__all__ = ["Extractor", "MethodInfo", "Spec", "accepts", "available", "create", "methods",
-           "parse_spec", "register", "weights_file"]
+__all__ = [
+    "Extractor",
+    "MethodInfo",
+    "Spec",
+    "accepts",
+    "available",
+    "create",
+    "methods",
+    "parse_spec",
+    "register",
+    "weights_file",
+]
 
 Factory = Callable[..., Extractor]
 
@@ -69,8 +79,14 @@ class MethodInfo:
     summary: str = ""
 
 
-def register(name: str, options: type | None = None, *, arg: str | None = None, wraps: bool = False,
-             weights: Callable[[str | None], Path | None] | None = None) -> Callable[[Factory], Factory]:
+def register(
+    name: str,
+    options: type | None = None,
+    *,
+    arg: str | None = None,
+    wraps: bool = False,
+    weights: Callable[[str | None], Path | None] | None = None,
+) -> Callable[[Factory], Factory]:
     """Decorator: register ``factory`` as method ``name`` (see :class:`MethodInfo`)."""
 
     def wrap(factory: Factory) -> Factory:
@@ -192,4 +208,3 @@ def create(spec: str, **options: Any) -> Extractor:
     those in the spec of the method that runs on the burst (inside any wrappers).
     """
     return _build(parse_spec(spec), options)
-

@@ -29,13 +29,20 @@ def phase_shift(reference: np.ndarray, image: np.ndarray, window: np.ndarray, up
     ``1 / upsample`` px by a matrix-multiply DFT upsampling around it (scikit-image).
     """
     registration = require("skimage.registration", "phase-correlation alignment (merge+...)")
-    shift_yx, _, _ = registration.phase_cross_correlation(reference * window, image * window,
-                                                          upsample_factor=upsample, normalization=None)
+    shift_yx, _, _ = registration.phase_cross_correlation(
+        reference * window, image * window, upsample_factor=upsample, normalization=None
+    )
     return -np.asarray(shift_yx[::-1], np.float64)
 
 
-def ecc_shift(reference: np.ndarray, image: np.ndarray, initial: np.ndarray, smoothing: int = 5,
-              margin: int = 8, iterations: int = 100) -> np.ndarray:
+def ecc_shift(
+    reference: np.ndarray,
+    image: np.ndarray,
+    initial: np.ndarray,
+    smoothing: int = 5,
+    margin: int = 8,
+    iterations: int = 100,
+) -> np.ndarray:
     """Refine ``initial`` ``(dx, dy)`` by maximising the enhanced correlation coefficient (OpenCV ECC).
 
     The images are smoothed by a ``smoothing``-pixel Gaussian inside OpenCV; pixels

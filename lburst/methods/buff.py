@@ -183,7 +183,9 @@ class Buff:
             x = x + np.where(move, np.rint(offset[:, 0]).astype(np.int64), 0)
             y = y + np.where(move, np.rint(offset[:, 1]).astype(np.int64), 0)
             lvl = lvl + np.where(move, np.rint(offset[:, 2]).astype(np.int64), 0)
-            alive &= (lvl >= 1) & (lvl <= cfg.layers) & (x >= BORDER) & (x < w - BORDER) & (y >= BORDER) & (y < h - BORDER)
+            alive &= (
+                (lvl >= 1) & (lvl <= cfg.layers) & (x >= BORDER) & (x < w - BORDER) & (y >= BORDER) & (y < h - BORDER)
+            )
             x, y, lvl = np.where(alive, x, BORDER), np.where(alive, y, BORDER), np.where(alive, lvl, 1)
         alive &= done
         contrast = cube[:, 1, 1, 1] + 0.5 * np.einsum("ci,ci->c", grad, offset)
@@ -199,16 +201,26 @@ class Buff:
             sharp = sharpness >= cfg.min_slope_sharpness
             lvl, y, x, offset, contrast = lvl[sharp], y[sharp], x[sharp], offset[sharp], contrast[sharp]
             slopes, sharpness, keep = slopes[sharp], sharpness[sharp], keep[sharp]
-        return {"x": x + offset[:, 0], "y": y + offset[:, 1], "level": lvl, "sublevel": offset[:, 2],
-                "contrast": np.abs(contrast), "slope": slopes, "octave": np.full(len(keep), octv.index),
-                "sharpness": sharpness, "gauss": octv.gauss}
+        return {
+            "x": x + offset[:, 0],
+            "y": y + offset[:, 1],
+            "level": lvl,
+            "sublevel": offset[:, 2],
+            "contrast": np.abs(contrast),
+            "slope": slopes,
+            "octave": np.full(len(keep), octv.index),
+            "sharpness": sharpness,
+            "gauss": octv.gauss,
+        }
 
     def _cube(self, octv, lvl, y, x, best, shifts) -> np.ndarray:
         """DoG values ``(C, 3, 3, 3)`` around each (level, y, x) at grid slope ``best`` (C,) of ``shifts`` (S, N, 2)."""
         d = np.arange(-1, 2)
-        L, Y, X = np.broadcast_arrays(lvl[:, None, None, None] + d[None, :, None, None],
-                                      y[:, None, None, None] + d[None, None, :, None],
-                                      x[:, None, None, None] + d[None, None, None, :])
+        L, Y, X = np.broadcast_arrays(
+            lvl[:, None, None, None] + d[None, :, None, None],
+            y[:, None, None, None] + d[None, None, :, None],
+            x[:, None, None, None] + d[None, None, None, :],
+        )
         return octv.gather_slopes(shifts, best, L, Y, X)
 
     def _slope_energy(self, octv: OctaveStack, lvl, y, x, shifts: np.ndarray) -> np.ndarray:
@@ -258,7 +270,7 @@ class Buff:
         coords = np.array(np.unravel_index(best, shape))  # (ndim, C); 2-D: (v index, u index)
         nd = len(shape)
         ramp = np.arange(-1, 2)
-        vals = np.zeros((c, 3 ** nd))
+        vals = np.zeros((c, 3**nd))
         moved = np.ones(c, bool)
         for _ in range(SLOPE_CLIMB + 1):
             active = np.nonzero(moved)[0]
@@ -365,8 +377,9 @@ def remap(image: np.ndarray, x: np.ndarray, y: np.ndarray, interpolation: int = 
     rows = 32000
     out = np.empty(xf.shape, np.float32)
     for i in range(0, len(xf), rows):
-        out[i : i + rows] = cv2.remap(image, xf[i : i + rows], yf[i : i + rows], interpolation,
-                                      borderMode=cv2.BORDER_REPLICATE)
+        out[i : i + rows] = cv2.remap(
+            image, xf[i : i + rows], yf[i : i + rows], interpolation, borderMode=cv2.BORDER_REPLICATE
+        )
     return out.reshape(shape)
 
 

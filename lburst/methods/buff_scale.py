@@ -150,8 +150,9 @@ class OctaveStack:
             out += stack[level, y + y0, x + x0]
         return out
 
-    def gather_slopes(self, shifts: np.ndarray, slope: np.ndarray, level: np.ndarray, y: np.ndarray,
-                      x: np.ndarray) -> np.ndarray:
+    def gather_slopes(
+        self, shifts: np.ndarray, slope: np.ndarray, level: np.ndarray, y: np.ndarray, x: np.ndarray
+    ) -> np.ndarray:
         """Mean DoG at ``(level, y, x)`` (shape ``(C, ...)``) where point c uses slope ``slope[c]``
         of the per-slope, per-frame shifts ``shifts`` ``(S, N, 2)``."""
         out = np.zeros(level.shape, np.float32)
@@ -161,8 +162,9 @@ class OctaveStack:
         return out
 
 
-def frame_pyramids(frames: np.ndarray, sigma: float, init_sigma: float, layers: int, octaves: int,
-                   max_shift: float, cache_limit: int) -> Iterator[OctaveStack]:
+def frame_pyramids(
+    frames: np.ndarray, sigma: float, init_sigma: float, layers: int, octaves: int, max_shift: float, cache_limit: int
+) -> Iterator[OctaveStack]:
     """Yield :class:`OctaveStack` for octaves 0.. of grayscale ``frames`` ``(N, H, W)`` in [0, 1].
 
     ``max_shift`` (full-resolution px) sizes the padding so any slope shift stays inside.

@@ -60,8 +60,19 @@ class LearnedOptions:
 
     def multiscale(self) -> dict:
         """The :class:`MultiScaleConfig` fields, for :meth:`LBurst.extract`."""
-        return {name: getattr(self, name) for name in ("min_size", "max_size", "scale_factor", "rel_thr", "rep_thr",
-                                                       "published_coordinates", "fast", "precision")}
+        return {
+            name: getattr(self, name)
+            for name in (
+                "min_size",
+                "max_size",
+                "scale_factor",
+                "rel_thr",
+                "rep_thr",
+                "published_coordinates",
+                "fast",
+                "precision",
+            )
+        }
 
 
 class LearnedExtractor:

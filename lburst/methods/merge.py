@@ -29,8 +29,13 @@ def warp_frame(frame: np.ndarray, shift: np.ndarray, interpolation: int = cv2.IN
     """Resample ``frame`` ``(H, W, C)`` onto the common frame: ``out(p) = frame(p + shift)`` (float32)."""
     matrix = np.array([[1, 0, shift[0]], [0, 1, shift[1]]], np.float32)
     h, w = frame.shape[:2]
-    out = cv2.warpAffine(frame.astype(np.float32), matrix, (w, h), flags=interpolation | cv2.WARP_INVERSE_MAP,
-                         borderMode=cv2.BORDER_REPLICATE)
+    out = cv2.warpAffine(
+        frame.astype(np.float32),
+        matrix,
+        (w, h),
+        flags=interpolation | cv2.WARP_INVERSE_MAP,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
     return out.reshape(frame.shape)
 
 
@@ -42,8 +47,13 @@ def valid_mask(shape: tuple[int, int], shift: np.ndarray) -> np.ndarray:
     return ((y >= 0) & (y <= h - 1))[:, None] & ((x >= 0) & (x <= w - 1))[None, :]
 
 
-def merge_burst(burst: np.ndarray, shifts: np.ndarray | None = None, reduce: Reduce = "mean",
-                method: Method = "phase", motion: Motion = "free") -> np.ndarray:
+def merge_burst(
+    burst: np.ndarray,
+    shifts: np.ndarray | None = None,
+    reduce: Reduce = "mean",
+    method: Method = "phase",
+    motion: Motion = "free",
+) -> np.ndarray:
     """Warp every frame onto the common frame (bilinear, sub-pixel) and average.
 
     Args:
@@ -87,8 +97,9 @@ class MergeThen:
     fit.  ``extractor(burst, shifts=true_shifts)`` skips estimation (oracle merge).
     """
 
-    def __init__(self, inner: Extractor, method: Method = "ecc", motion: Motion = "linear",
-                 reduce: Reduce = "mean") -> None:
+    def __init__(
+        self, inner: Extractor, method: Method = "ecc", motion: Motion = "linear", reduce: Reduce = "mean"
+    ) -> None:
         self.inner = inner
         self.method = method
         self.motion = motion
@@ -118,8 +129,9 @@ def merge(inner: Extractor, options: MergeOptions) -> MergeThen:
     return MergeThen(inner, method=options.method, motion=options.motion, reduce=options.reduce)
 
 
-def align_burst(burst: np.ndarray, shifts: np.ndarray | None = None, method: Method = "ecc",
-                motion: Motion = "linear") -> np.ndarray:
+def align_burst(
+    burst: np.ndarray, shifts: np.ndarray | None = None, method: Method = "ecc", motion: Motion = "linear"
+) -> np.ndarray:
     """Every frame resampled onto the common frame (bilinear, replicated borders), rounded
     to the burst's dtype: the burst as it would be without its motion (the estimated
     shifts unless ``shifts`` are given).  The common frame is returned untouched."""

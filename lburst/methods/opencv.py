@@ -21,8 +21,9 @@ from lburst.methods import register
 from lburst.methods.frames import check_burst, to_gray8
 
 
-def keypoints_to_features(keypoints: tuple[cv2.KeyPoint, ...], descriptors: np.ndarray | None, dim: int,
-                          binary: bool) -> Features:
+def keypoints_to_features(
+    keypoints: tuple[cv2.KeyPoint, ...], descriptors: np.ndarray | None, dim: int, binary: bool
+) -> Features:
     """Convert OpenCV keypoints and descriptors to a features dict (with ``orientations``)."""
     if not keypoints or descriptors is None:
         features = empty_features(dim, binary)

@@ -104,8 +104,10 @@ def option_table(cls: type | None) -> list[tuple[str, str, Any]]:
     if cls is None:
         return []
     hints = typing.get_type_hints(cls)
-    return [(f.name, _type_name(hints[f.name]), f.default if f.default is not dataclasses.MISSING else None)
-            for f in dataclasses.fields(cls)]
+    return [
+        (f.name, _type_name(hints[f.name]), f.default if f.default is not dataclasses.MISSING else None)
+        for f in dataclasses.fields(cls)
+    ]
 
 
 def format_default(value: Any) -> str:
@@ -138,8 +140,7 @@ def parse_options(cls: type | None, given: dict[str, Any], method: str, kind: st
     names = [f.name for f in dataclasses.fields(cls)]
     unknown = sorted(set(given) - set(names))
     if unknown:
-        raise ValueError(f"unknown options for {kind} {method!r}: {', '.join(unknown)}; "
-                         f"valid: {describe_options(cls)}")
+        raise ValueError(f"unknown options for {kind} {method!r}: {', '.join(unknown)}; valid: {describe_options(cls)}")
     values = {}
     for key, value in given.items():
         try:

@@ -53,7 +53,9 @@ def orientations(sample: Sampler, centres: np.ndarray, sigmas: np.ndarray) -> tu
     inner = offsets[1:-1]
     dist2 = inner[None, :] ** 2 + inner[:, None] ** 2
     weight = np.exp(-dist2[None] / (2 * (ORI_SIGMA * sigmas[:, None, None]) ** 2))
-    inside = (np.abs(inner)[None, None, :] <= radii[:, None, None]) & (np.abs(inner)[None, :, None] <= radii[:, None, None])
+    inside = (np.abs(inner)[None, None, :] <= radii[:, None, None]) & (
+        np.abs(inner)[None, :, None] <= radii[:, None, None]
+    )
     magnitude = np.hypot(gx, gy) * weight * inside
     bins = np.rint(np.arctan2(gy, gx) % (2 * np.pi) * (ORI_BINS / (2 * np.pi))).astype(np.int64) % ORI_BINS
     c = len(centres)

@@ -68,12 +68,20 @@ class MultiScaleConfig:
         if self.max_size < self.min_size:
             raise ValueError(f"max_size {self.max_size} is below min_size {self.min_size}")
         if not _is_real(self.scale_factor) or not 1 < self.scale_factor < float("inf"):
-            raise ValueError(f"scale_factor must be a number > 1 (the ratio of consecutive levels), "
-                             f"got {self.scale_factor!r}")
-        if not (_is_real(self.min_scale) and _is_real(self.max_scale) and 0 <= self.min_scale <= self.max_scale
-                and self.max_scale > 0 and self.max_scale < float("inf")):
-            raise ValueError(f"scales must satisfy 0 <= min_scale <= max_scale, max_scale > 0; "
-                             f"got {self.min_scale!r}, {self.max_scale!r}")
+            raise ValueError(
+                f"scale_factor must be a number > 1 (the ratio of consecutive levels), got {self.scale_factor!r}"
+            )
+        if not (
+            _is_real(self.min_scale)
+            and _is_real(self.max_scale)
+            and 0 <= self.min_scale <= self.max_scale
+            and self.max_scale > 0
+            and self.max_scale < float("inf")
+        ):
+            raise ValueError(
+                f"scales must satisfy 0 <= min_scale <= max_scale, max_scale > 0; "
+                f"got {self.min_scale!r}, {self.max_scale!r}"
+            )
         for name in ("rel_thr", "rep_thr"):
             value = getattr(self, name)
             if not _is_real(value) or not 0 <= value <= 1:
@@ -86,8 +94,10 @@ class MultiScaleConfig:
         autocast_dtype(self.precision)
         levels = 1 + math.log(self.max_size / self.min_size) / math.log(self.scale_factor)
         if levels > MAX_LEVELS:
-            raise ValueError(f"scale_factor {self.scale_factor} between max_size {self.max_size} and min_size "
-                             f"{self.min_size} makes {levels:.0f} pyramid levels (at most {MAX_LEVELS})")
+            raise ValueError(
+                f"scale_factor {self.scale_factor} between max_size {self.max_size} and min_size "
+                f"{self.min_size} makes {levels:.0f} pyramid levels (at most {MAX_LEVELS})"
+            )
 
 
 MAX_LEVELS = 64  # pyramid levels of one extraction (the paper's settings make 9)
@@ -99,8 +109,11 @@ def _is_int(value) -> bool:
 
 
 def _is_real(value) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) \
+    return (
+        isinstance(value, (int, float, np.integer, np.floating))
+        and not isinstance(value, bool)
         and math.isfinite(value)
+    )
 
 
 def frame_permutation(n: int, order: str) -> list[int]:
@@ -188,7 +201,10 @@ class LBurst:
 
     @classmethod
     def from_checkpoint(
-        cls, path: str | Path, device: str | torch.device | None = None, frame_order: str = "temporal",
+        cls,
+        path: str | Path,
+        device: str | torch.device | None = None,
+        frame_order: str = "temporal",
         align: bool | None = None,
     ) -> "LBurst":
         """Load a published or lburst checkpoint (see :func:`lburst.model.load_checkpoint`).
@@ -291,8 +307,10 @@ class LBurst:
                 size = (round(height * s), round(width * s))
                 x = F.interpolate(x, size, mode="bilinear", align_corners=False)
         if not scores:
-            raise ValueError(f"no pyramid level between max_size {cfg.max_size} and min_size {cfg.min_size} "
-                             f"for a {width}x{height} image")
+            raise ValueError(
+                f"no pyramid level between max_size {cfg.max_size} and min_size {cfg.min_size} "
+                f"for a {width}x{height} image"
+            )
         score = torch.cat(scores)
         k = len(score) if cfg.top_k is None else min(cfg.top_k, len(score))
         order = torch.topk(score, k, sorted=True).indices

@@ -63,8 +63,14 @@ HEAD_BAND_BYTES = 2 << 20
 class FastLBurstNet(nn.Module):
     """Inference-only LBurst network; see the module docstring."""
 
-    def __init__(self, net: LBurstNet, precision: str = "fp32", tiled: bool = True,
-                 stripe_rows: int | None = None, head_band_rows: int | None = None) -> None:
+    def __init__(
+        self,
+        net: LBurstNet,
+        precision: str = "fp32",
+        tiled: bool = True,
+        stripe_rows: int | None = None,
+        head_band_rows: int | None = None,
+    ) -> None:
         """``precision``: see :meth:`core`.  ``tiled``: on the CPU, run the full-resolution
         layers in stripes (:meth:`raw`) and the heads in bands (:meth:`_heads`) so their maps
         stay in the cache; ``stripe_rows`` and ``head_band_rows`` set the sizes (default:
@@ -124,8 +130,9 @@ class FastLBurstNet(nn.Module):
             top, bottom = int(a == 0), int(z == height)  # image borders: zero padding at every conv
             y = x[:, :, a:z]
             for conv in convs:
-                y = F.conv2d(F.pad(y, (0, 0, top, bottom)) if top or bottom else y, conv.weight, conv.bias,
-                             padding=(0, 1)).relu_()
+                y = F.conv2d(
+                    F.pad(y, (0, 0, top, bottom)) if top or bottom else y, conv.weight, conv.bias, padding=(0, 1)
+                ).relu_()
             first = a if top else a + halo  # image row of y's first row
             stripes.append(F.max_pool2d(y[:, :, r0 - first : r1 - first], 2))
         return torch.cat(stripes, dim=2)

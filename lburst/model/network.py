@@ -74,8 +74,12 @@ def check_precision(precision: str, device: torch.device | str) -> None:
         return
     flags = _cpu_flags()
     if flags is not None and not flags.intersection(NATIVE_BF16_FLAGS):
-        warnings.warn("--precision bf16 on a CPU without native bf16 (no avx512_bf16 or amx_bf16 in /proc/cpuinfo) "
-                      "runs about 3x slower than fp32", RuntimeWarning, stacklevel=2)
+        warnings.warn(
+            "--precision bf16 on a CPU without native bf16 (no avx512_bf16 or amx_bf16 in /proc/cpuinfo) "
+            "runs about 3x slower than fp32",
+            RuntimeWarning,
+            stacklevel=2,
+        )
 
 
 def training_memory_format(device: torch.device | str, name: str = "auto") -> torch.memory_format:
@@ -195,8 +199,10 @@ class LBurstNet(nn.Module):
             out["reliability_logits"] = logits[:, 1:2] - logits[:, 0:1]
         pad_w, pad_h = width - x.shape[-1], height - x.shape[-2]
         if pad_w or pad_h:  # odd input size: see the module docstring
-            out = {k: F.pad(v, (0, pad_w, 0, pad_h), mode="replicate" if k == "descriptors" else "constant")
-                   for k, v in out.items()}
+            out = {
+                k: F.pad(v, (0, pad_w, 0, pad_h), mode="replicate" if k == "descriptors" else "constant")
+                for k, v in out.items()
+            }
         return out
 
 

@@ -31,9 +31,18 @@ def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Pat
     out = Path(out)
     with atomic_path(out) as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        torch.onnx.export(core, (example,), str(tmp), dynamo=True, opset_version=opset, input_names=["burst"],
-                          output_names=["repeatability", "reliability", "half"],
-                          dynamic_shapes={"x": {2: height, 3: width}}, external_data=False, verbose=False)
+        torch.onnx.export(
+            core,
+            (example,),
+            str(tmp),
+            dynamo=True,
+            opset_version=opset,
+            input_names=["burst"],
+            output_names=["repeatability", "reliability", "half"],
+            dynamic_shapes={"x": {2: height, 3: width}},
+            external_data=False,
+            verbose=False,
+        )
     return out
 
 

@@ -126,7 +126,9 @@ def _light_map(bounds: np.ndarray, lamps: np.ndarray, cfg: CityConfig, shape: tu
     return ambient + lamp[..., None] * warm
 
 
-def _paint_cars(img: np.ndarray, bounds: np.ndarray, phase: np.ndarray, cfg: CityConfig, rng: np.random.Generator) -> None:
+def _paint_cars(
+    img: np.ndarray, bounds: np.ndarray, phase: np.ndarray, cfg: CityConfig, rng: np.random.Generator
+) -> None:
     """Parked cars (coloured rectangles with a dark windscreen) along the streets."""
     if cfg.car_spacing <= 0:
         return
@@ -154,7 +156,9 @@ def _paint_cars(img: np.ndarray, bounds: np.ndarray, phase: np.ndarray, cfg: Cit
                     img[max(r0 + 3, 0) : max(r1 - 3, 0), max(q, 0) : max(q + (c1 - c0) // 6, 0)] = 25
 
 
-def _ground(bounds: np.ndarray, phase: np.ndarray, lamps: np.ndarray, cfg: CityConfig, rng: np.random.Generator) -> MipTexture:
+def _ground(
+    bounds: np.ndarray, phase: np.ndarray, lamps: np.ndarray, cfg: CityConfig, rng: np.random.Generator
+) -> MipTexture:
     t = cfg.ground_texel
     width, height = (int(np.ceil(d / t)) for d in bounds[1] - bounds[0])
     img = mosaic(height, width, rng)
@@ -202,7 +206,9 @@ def _roofs(cfg: CityConfig, rng: np.random.Generator) -> MipTexture:
     return MipTexture(roofs * cfg.ambient)
 
 
-def _buildings(bounds: np.ndarray, phase: np.ndarray, cfg: CityConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _buildings(
+    bounds: np.ndarray, phase: np.ndarray, cfg: CityConfig, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     lot = cfg.block - cfg.street_width
     lo, hi = [], []
     xs = np.arange(phase[0] - cfg.block, bounds[1, 0], cfg.block) + cfg.street_width

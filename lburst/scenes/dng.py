@@ -17,9 +17,9 @@ import numpy as np
 from lburst.io import atomic_path
 
 # XYZ (D65) -> linear sRGB, IEC 61966-2-1
-XYZ_TO_SRGB = np.array([[3.2404542, -1.5371385, -0.4985314],
-                        [-0.9692660, 1.8760108, 0.0415560],
-                        [0.0556434, -0.2040259, 1.0572252]])
+XYZ_TO_SRGB = np.array(
+    [[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560], [0.0556434, -0.2040259, 1.0572252]]
+)
 PATTERNS = {"RGGB": (0, 1, 1, 2), "BGGR": (2, 1, 1, 0), "GRBG": (1, 0, 2, 1), "GBRG": (1, 2, 0, 1)}
 
 
@@ -38,8 +38,14 @@ def _rational(values, denominator: int = 10000) -> list[int]:
     return out
 
 
-def write_dng(path: str | Path, cfa: np.ndarray, black_level: int, white_level: int, pattern: str = "RGGB",
-              model: str = "lburst synthetic camera") -> Path:
+def write_dng(
+    path: str | Path,
+    cfa: np.ndarray,
+    black_level: int,
+    white_level: int,
+    pattern: str = "RGGB",
+    model: str = "lburst synthetic camera",
+) -> Path:
     """Write the Bayer mosaic ``cfa`` (H, W) uint16 (raw counts, black level included) as a DNG, atomically."""
     import tifffile
 
@@ -66,6 +72,14 @@ def write_dng(path: str | Path, cfa: np.ndarray, black_level: int, white_level: 
     ]
     path = Path(path)
     with atomic_path(path) as tmp:
-        tifffile.imwrite(tmp, cfa, photometric=32803, subfiletype=0, bitspersample=16, compression=None,
-                         extratags=tags, metadata=None)
+        tifffile.imwrite(
+            tmp,
+            cfa,
+            photometric=32803,
+            subfiletype=0,
+            bitspersample=16,
+            compression=None,
+            extratags=tags,
+            metadata=None,
+        )
     return path

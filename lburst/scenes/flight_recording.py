@@ -56,15 +56,23 @@ def frame_times(cfg: NightFlightConfig) -> np.ndarray:
 
 def camera(cfg: NightFlightConfig) -> dict:
     K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
-    return {"model": "PINHOLE", "width": cfg.width, "height": cfg.height,
-            "params": [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])]}
+    return {
+        "model": "PINHOLE",
+        "width": cfg.width,
+        "height": cfg.height,
+        "params": [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])],
+    }
 
 
 def write_sidecars(cfg: NightFlightConfig, recording: Path, kind: str) -> None:
     """``meta.json`` (fps, camera, configuration) and ``gt.txt`` (per-frame TUM poses) of a recording."""
     times = frame_times(cfg)
-    write_tum(ground_truth_path(recording), times, [camera_pose(cfg, t) for t in times],
-              header=f"ground truth of the synthetic night flight ({kind}), camera-to-world, metres")
+    write_tum(
+        ground_truth_path(recording),
+        times,
+        [camera_pose(cfg, t) for t in times],
+        header=f"ground truth of the synthetic night flight ({kind}), camera-to-world, metres",
+    )
     meta = {"fps": fps(cfg), "camera": camera(cfg), "kind": kind, "frames": len(times), "night_flight": cfg.to_dict()}
     with atomic_path(meta_path(recording)) as tmp:
         tmp.write_text(json.dumps(meta, indent=1))
@@ -146,4 +154,3 @@ def write_flight_dng(folder: str | Path, cfg: NightFlightConfig, progress: bool 
             cfa, white = raw_frame(cfg, radiance, np.random.default_rng([cfg.seed, 3, j]))
             write_dng(folder / f"frame_{j:06d}.dng", cfa, BLACK_LEVEL, white)
     return folder
-

@@ -83,7 +83,9 @@ class NightFlightConfig:
         if self.n_bursts < 1 or self.width < 8 or self.height < 8 or self.supersample < 1:
             raise ValueError("n_bursts >= 1, image size >= 8 and supersample >= 1 are required")
         if self.pitch_deg + self.vfov_deg / 2 >= 85:
-            raise ValueError(f"pitch {self.pitch_deg} deg sees the horizon; lower it below {85 - self.vfov_deg / 2:.0f}")
+            raise ValueError(
+                f"pitch {self.pitch_deg} deg sees the horizon; lower it below {85 - self.vfov_deg / 2:.0f}"
+            )
         if self.city.max_height >= self.altitude - 2:
             raise ValueError("buildings must stay below the flight altitude")
 
@@ -134,7 +136,9 @@ def camera_pose(cfg: NightFlightConfig, time: float) -> tuple[np.ndarray, np.nda
     x_axis = np.array([heading[1], -heading[0], 0.0])
     y_axis = np.cross(z_axis, x_axis)
     base = np.stack([x_axis, y_axis, z_axis])
-    wobble = np.radians(cfg.shake_deg) * np.sin(2 * np.pi * np.array([1.3, 0.9, 0.7]) * time + np.array([0.4, 1.7, 2.9]))
+    wobble = np.radians(cfg.shake_deg) * np.sin(
+        2 * np.pi * np.array([1.3, 0.9, 0.7]) * time + np.array([0.4, 1.7, 2.9])
+    )
     R = Rotation.from_rotvec(wobble).as_matrix() @ base
     return R, -R @ centre
 
@@ -151,7 +155,12 @@ def reference(cfg: NightFlightConfig) -> Reference:
     poses = {burst_name(i): camera_pose(cfg, frame_time(cfg, i, mid)) for i in range(cfg.n_bursts)}
     centres = np.array([-R.T @ t for R, t in poses.values()])
     length = float(np.linalg.norm(np.diff(centres, axis=0), axis=1).sum())
-    camera = {"model": "PINHOLE", "width": cfg.width, "height": cfg.height, "params": [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]}
+    camera = {
+        "model": "PINHOLE",
+        "width": cfg.width,
+        "height": cfg.height,
+        "params": [K[0, 0], K[1, 1], K[0, 2], K[1, 2]],
+    }
     return Reference(source="synthetic", camera=camera, poses=poses, length=length)
 
 
@@ -160,8 +169,14 @@ def ground_bounds(cfg: NightFlightConfig, margin: float = 10.0) -> np.ndarray:
     K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
     w, h = cfg.width, cfg.height
     xs, ys = np.linspace(0, w, 33), np.linspace(0, h, 25)
-    uv = np.concatenate([np.column_stack([xs, np.zeros_like(xs)]), np.column_stack([xs, np.full_like(xs, h)]),
-                         np.column_stack([np.zeros_like(ys), ys]), np.column_stack([np.full_like(ys, w), ys])])
+    uv = np.concatenate(
+        [
+            np.column_stack([xs, np.zeros_like(xs)]),
+            np.column_stack([xs, np.full_like(xs, h)]),
+            np.column_stack([np.zeros_like(ys), ys]),
+            np.column_stack([np.full_like(ys, w), ys]),
+        ]
+    )
     pts = []
     for i in range(cfg.n_bursts):
         for k in (0, cfg.frames_per_burst - 1):
@@ -179,7 +194,9 @@ def make_city(cfg: NightFlightConfig) -> City:
     return build_city(ground_bounds(cfg), cfg.city, np.random.default_rng([cfg.seed, 0]))
 
 
-def render_view(city: City, K: np.ndarray, R: np.ndarray, t: np.ndarray, width: int, height: int, supersample: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def render_view(
+    city: City, K: np.ndarray, R: np.ndarray, t: np.ndarray, width: int, height: int, supersample: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
     """Noise-free image (H, W, 3) float32 0..255 and z-depth (H, W) (``inf``: sky) of a camera."""
     s = supersample
     Ks = np.diag([s, s, 1.0]) @ K
@@ -251,7 +268,9 @@ def clean_common_frames(cfg: NightFlightConfig, city: City | None = None) -> dic
     return out
 
 
-def make_night_flight(out_dir: str | Path, cfg: NightFlightConfig = NightFlightConfig(), progress: bool = True) -> Reference:
+def make_night_flight(
+    out_dir: str | Path, cfg: NightFlightConfig = NightFlightConfig(), progress: bool = True
+) -> Reference:
     """Render the flight into the scene folder ``out_dir`` and return its reference.
 
     Bursts already in ``out_dir`` are kept (resume); a folder made with another

@@ -55,7 +55,12 @@ def pinhole(camera: dict) -> dict:
         cx, cy = p[1], p[2]
     else:  # PINHOLE, OPENCV, FULL_OPENCV, ...: fx, fy, cx, cy first
         fx, fy, cx, cy = p[:4]
-    return {"model": "PINHOLE", "width": int(camera["width"]), "height": int(camera["height"]), "params": [fx, fy, cx, cy]}
+    return {
+        "model": "PINHOLE",
+        "width": int(camera["width"]),
+        "height": int(camera["height"]),
+        "params": [fx, fy, cx, cy],
+    }
 
 
 def make_reference(photos: Path, scene_dir: Path, progress: bool = True, **options) -> Reference | None:
@@ -91,9 +96,17 @@ def reference_options_used(scene_dir: Path) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
-def simulate_scene(photos: str | Path, out: str | Path, frames: int = 5, motion_px: float = 2.0,
-                   noise: str | None = "gaussian:50", seed: int = 0, reference: bool = True,
-                   progress: bool = True, reference_options: dict | None = None) -> Reference | None:
+def simulate_scene(
+    photos: str | Path,
+    out: str | Path,
+    frames: int = 5,
+    motion_px: float = 2.0,
+    noise: str | None = "gaussian:50",
+    seed: int = 0,
+    reference: bool = True,
+    progress: bool = True,
+    reference_options: dict | None = None,
+) -> Reference | None:
     """Write the burst scene of ``photos`` into ``out`` (module docstring); returns the reference (or ``None``).
 
     Bursts already written with ``frames`` frames are kept (a re-run resumes), and so is a
@@ -120,7 +133,9 @@ def simulate_scene(photos: str | Path, out: str | Path, frames: int = 5, motion_
     reference_options = dict(reference_options or {})
     if (out / "reference.json").is_file():
         existing = Reference.load(out / "reference.json")
-        if existing.source == REFERENCE_SOURCE and reference_options_used(out) == non_default_options(reference_options):
+        if existing.source == REFERENCE_SOURCE and reference_options_used(out) == non_default_options(
+            reference_options
+        ):
             return existing
     made = make_reference(photos, out, progress, **reference_options)  # replaces reference.json atomically
     if made is None:

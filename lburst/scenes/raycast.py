@@ -85,9 +85,7 @@ def box_windows(
     return windows
 
 
-def cast(
-    K: np.ndarray, R: np.ndarray, t: np.ndarray, width: int, height: int, lo: np.ndarray, hi: np.ndarray
-) -> Hits:
+def cast(K: np.ndarray, R: np.ndarray, t: np.ndarray, width: int, height: int, lo: np.ndarray, hi: np.ndarray) -> Hits:
     """Nearest hit of every pixel ray against the ground ``z = 0`` and boxes ``[lo, hi]``.
 
     Args:

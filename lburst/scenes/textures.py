@@ -15,8 +15,22 @@ from lburst.extras import require
 
 # scikit-image sample photos (bundled with the package, no download); ``cat`` is ``chelsea``
 PHOTOS = (
-    "astronaut", "coffee", "chelsea", "rocket", "immunohistochemistry", "hubble_deep_field", "retina",
-    "camera", "brick", "grass", "gravel", "moon", "coins", "clock", "cell", "text",
+    "astronaut",
+    "coffee",
+    "chelsea",
+    "rocket",
+    "immunohistochemistry",
+    "hubble_deep_field",
+    "retina",
+    "camera",
+    "brick",
+    "grass",
+    "gravel",
+    "moon",
+    "coins",
+    "clock",
+    "cell",
+    "text",
 )
 
 
@@ -45,7 +59,9 @@ def photo_patches(names: tuple[str, ...] = PHOTOS, size: int = 256, min_std: flo
     return tuple(out)
 
 
-def mosaic(height: int, width: int, rng: np.random.Generator, patches: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
+def mosaic(
+    height: int, width: int, rng: np.random.Generator, patches: tuple[np.ndarray, ...] | None = None
+) -> np.ndarray:
     """A uint8 (height, width, 3) grid of photo patches, each rotated by a multiple of
     90 degrees, maybe mirrored, with a random colour gain.  Patches are dealt in a
     shuffled order, so a patch comes back only after all the others."""
@@ -65,7 +81,9 @@ def mosaic(height: int, width: int, rng: np.random.Generator, patches: tuple[np.
     return out
 
 
-def noise_field(height: int, width: int, rng: np.random.Generator, scales: tuple[float, ...] = (1.0, 4.0, 16.0)) -> np.ndarray:
+def noise_field(
+    height: int, width: int, rng: np.random.Generator, scales: tuple[float, ...] = (1.0, 4.0, 16.0)
+) -> np.ndarray:
     """Float32 (height, width) random texture, a sum of Gaussian noise smoothed at each
     of ``scales`` (texels), each normalised to unit standard deviation: never repeats."""
     out = np.zeros((height, width), np.float32)

@@ -55,6 +55,7 @@ def opencv_path(path: str | Path) -> str:
 
     return _opencv_path(path)
 
+
 DEFAULT_FOCAL_FACTOR = 1.2  # COLMAP's own default prior: f = 1.2 * max(W, H)
 
 
@@ -139,8 +140,13 @@ def camera_params(model: str, width: int, height: int, focal: float) -> list[flo
 def default_camera(width: int, height: int, model: str = "SIMPLE_RADIAL", focal: float | None = None) -> dict:
     """A camera dict; without ``focal``, COLMAP's default prior ``f = 1.2 * max(W, H)`` (not trusted)."""
     f = DEFAULT_FOCAL_FACTOR * max(width, height) if focal is None else focal
-    return {"model": model, "width": int(width), "height": int(height),
-            "params": camera_params(model, width, height, f), "prior_focal": focal is not None}
+    return {
+        "model": model,
+        "width": int(width),
+        "height": int(height),
+        "params": camera_params(model, width, height, f),
+        "prior_focal": focal is not None,
+    }
 
 
 def exif_camera(path: str | Path, model: str = "SIMPLE_RADIAL") -> dict | None:
@@ -158,8 +164,9 @@ def _pycolmap_camera(camera: dict) -> pycolmap.Camera:
     return cam
 
 
-def write_database(db_path: str | Path, job: ColmapJob, keypoints: list[np.ndarray],
-                   pairs: np.ndarray, matches: list[np.ndarray]) -> list[int]:
+def write_database(
+    db_path: str | Path, job: ColmapJob, keypoints: list[np.ndarray], pairs: np.ndarray, matches: list[np.ndarray]
+) -> list[int]:
     """Create ``db_path`` afresh with the job's cameras, one rig and frame per image, keypoints and matches.
 
     ``keypoints[i]`` (K_i, 2) are in lburst's convention and stored +0.5 (COLMAP's);
@@ -234,8 +241,9 @@ def read_inliers(db_path: str | Path, image_ids: list[int]) -> tuple[np.ndarray,
     return np.array(pairs, dtype=np.int64).reshape(-1, 2), inliers
 
 
-def map_database(db_path: str | Path, image_dir: str | Path, work_dir: str | Path,
-                 options: ColmapOptions) -> pycolmap.Reconstruction | None:
+def map_database(
+    db_path: str | Path, image_dir: str | Path, work_dir: str | Path, options: ColmapOptions
+) -> pycolmap.Reconstruction | None:
     """Run the mapper; return the model with the most registered images, or ``None`` if none."""
     pycolmap.set_random_seed(options.seed)
     work_dir = Path(work_dir)
@@ -275,8 +283,12 @@ def summarize(rec: pycolmap.Reconstruction | None) -> dict:
         registered[Path(image.name).stem] = {
             "R": pose.rotation.matrix().tolist(),
             "t": np.asarray(pose.translation).tolist(),
-            "camera": {"model": camera.model.name, "width": camera.width, "height": camera.height,
-                       "params": np.asarray(camera.params).tolist()},
+            "camera": {
+                "model": camera.model.name,
+                "width": camera.width,
+                "height": camera.height,
+                "params": np.asarray(camera.params).tolist(),
+            },
             "num_points3D": int(image.num_points3D),
         }
     return {
@@ -340,14 +352,21 @@ def run_job_subprocess(job_dir: str | Path, timeout: float | None = None) -> dic
         log_path = job_dir / "colmap.log"
         with open(log_path, "w") as log:
             try:
-                proc = subprocess.run([sys.executable, "-m", "lburst.cli.colmap_job", str(job_dir),
-                                       "--parent", str(os.getpid())], stdout=log, stderr=subprocess.STDOUT,
-                                      timeout=timeout)
+                proc = subprocess.run(
+                    [sys.executable, "-m", "lburst.cli.colmap_job", str(job_dir), "--parent", str(os.getpid())],
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    timeout=timeout,
+                )
             except subprocess.TimeoutExpired as err:
                 raise ColmapError(f"COLMAP did not finish in {timeout} s (log: {log_path})") from err
         if proc.returncode != 0 or not (job_dir / "output.json").is_file():
-            how = f"was killed by signal {-proc.returncode}" if proc.returncode < 0 else f"exited with {proc.returncode}"
-            raise ColmapError(f"COLMAP {how} (log: {log_path}):\n{failure_summary(log_path.read_text(errors='replace'))}")
+            how = (
+                f"was killed by signal {-proc.returncode}" if proc.returncode < 0 else f"exited with {proc.returncode}"
+            )
+            raise ColmapError(
+                f"COLMAP {how} (log: {log_path}):\n{failure_summary(log_path.read_text(errors='replace'))}"
+            )
         return json.loads((job_dir / "output.json").read_text())
 
 
@@ -357,7 +376,7 @@ def failure_summary(log: str, lines: int = 8) -> str:
     rows = log.splitlines()
     for i, row in enumerate(rows):
         if "Check failed" in row:
-            text = row[row.index("Check failed"):]
+            text = row[row.index("Check failed") :]
             following = rows[i + 1].strip() if i + 1 < len(rows) else ""
             return text if not following or following.startswith("***") else f"{text} {following}"
     errors = [row for row in rows if re.match(r"^[A-Za-z_.]*(Error|Exception)\b", row)]
@@ -378,8 +397,9 @@ def check_camera(camera: dict) -> None:
     except Exception:
         raise ValueError(f"unknown camera model {model!r}") from None
     values = np.asarray(params, dtype=object)
-    if values.ndim != 1 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
-                                   for v in values):
+    if values.ndim != 1 or not all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values
+    ):
         raise ValueError(f"params must be a list of finite numbers, got {params!r}")
     if len(values) != expected:
         raise ValueError(f"{model} takes {expected} params, got {len(values)}")

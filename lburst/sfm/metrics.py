@@ -49,6 +49,7 @@ class Reconstruction(Protocol):
     def match_data(self) -> tuple[list[np.ndarray], np.ndarray, list[np.ndarray]] | None:
         """Keypoints per image, verified pairs (Q, 2) and their inlier matches, or ``None``."""
 
+
 PRECISION_THRESHOLD_PX = 4.0
 
 # (key, column title, format) of the markdown table
@@ -70,8 +71,9 @@ COLUMNS: list[tuple[str, str, str]] = [
 TRAJECTORY_KEYS = ("ate_rmse", "ate_percent", "rpe_trans_rmse", "rpe_rot_rmse_deg")
 
 
-def scene_metrics(n_images: int, keypoint_counts: list[int], putative_counts: list[int],
-                  inlier_counts: list[int], summary: dict) -> dict[str, float]:
+def scene_metrics(
+    n_images: int, keypoint_counts: list[int], putative_counts: list[int], inlier_counts: list[int], summary: dict
+) -> dict[str, float]:
     """The reference-free columns for one scene (module docstring), from counts and the COLMAP summary."""
     kp = float(np.sum(keypoint_counts))
     putative = float(np.sum(putative_counts))
@@ -91,8 +93,14 @@ def scene_metrics(n_images: int, keypoint_counts: list[int], putative_counts: li
     }
 
 
-def epipolar_distances(points_a: np.ndarray, points_b: np.ndarray, camera_a: dict, camera_b: dict,
-                       pose_a: tuple[np.ndarray, np.ndarray], pose_b: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+def epipolar_distances(
+    points_a: np.ndarray,
+    points_b: np.ndarray,
+    camera_a: dict,
+    camera_b: dict,
+    pose_a: tuple[np.ndarray, np.ndarray],
+    pose_b: tuple[np.ndarray, np.ndarray],
+) -> np.ndarray:
     """Symmetric epipolar distance (M,) in pixels of matches (M, 2) (COLMAP pixel convention) under given cameras.
 
     ``camera_*`` are COLMAP camera dicts, ``pose_*`` world-to-camera ``(R, t)``.  Each
@@ -119,9 +127,15 @@ def epipolar_distances(points_a: np.ndarray, points_b: np.ndarray, camera_a: dic
     return np.maximum(d_a, d_b)
 
 
-def match_precision(names: list[str], keypoints: list[np.ndarray], pairs: np.ndarray, inliers: list[np.ndarray],
-                    reference: Reference, cameras: dict[str, dict],
-                    threshold: float = PRECISION_THRESHOLD_PX) -> tuple[float | None, int]:
+def match_precision(
+    names: list[str],
+    keypoints: list[np.ndarray],
+    pairs: np.ndarray,
+    inliers: list[np.ndarray],
+    reference: Reference,
+    cameras: dict[str, dict],
+    threshold: float = PRECISION_THRESHOLD_PX,
+) -> tuple[float | None, int]:
     """Fraction of inlier matches within ``threshold`` px of the reference epipolar geometry, and how many were checked.
 
     ``keypoints[i]`` (K_i, 2) in lburst's convention (+0.5 is added here); ``pairs`` (Q, 2)
@@ -133,8 +147,14 @@ def match_precision(names: list[str], keypoints: list[np.ndarray], pairs: np.nda
         na, nb = names[a], names[b]
         if na not in reference.poses or nb not in reference.poses or len(m) == 0:
             continue
-        d = epipolar_distances(keypoints[a][m[:, 0]] + 0.5, keypoints[b][m[:, 1]] + 0.5, cameras[na], cameras[nb],
-                               reference.poses[na], reference.poses[nb])
+        d = epipolar_distances(
+            keypoints[a][m[:, 0]] + 0.5,
+            keypoints[b][m[:, 1]] + 0.5,
+            cameras[na],
+            cameras[nb],
+            reference.poses[na],
+            reference.poses[nb],
+        )
         good += int(np.sum(d <= threshold))
         total += len(d)
     return (good / total if total else None), total
@@ -148,9 +168,12 @@ def reference_length(reference: Reference, order: list[str]) -> float:
     return path_length(np.array([centres[n] for n in order if n in centres]))
 
 
-def evaluate_against_reference(result: Reconstruction, reference: Reference | str | Path,
-                               cameras: dict[str, dict] | None = None,
-                               threshold: float = PRECISION_THRESHOLD_PX) -> dict[str, Any]:
+def evaluate_against_reference(
+    result: Reconstruction,
+    reference: Reference | str | Path,
+    cameras: dict[str, dict] | None = None,
+    threshold: float = PRECISION_THRESHOLD_PX,
+) -> dict[str, Any]:
     """Trajectory errors and match precision of ``result`` against ``reference`` (module docstring).
 
     ``reference`` is a :class:`Reference` or the path of a ``reference.json`` (whose
@@ -178,8 +201,11 @@ def evaluate_against_reference(result: Reconstruction, reference: Reference | st
     common = [n for n in result.names if n in result.poses and n in reference.poses]
     if len(common) >= 3:
         try:
-            errors = trajectory_errors([result.poses[n] for n in common], [reference.poses[n] for n in common],
-                                       length=reference_length(reference, result.names))
+            errors = trajectory_errors(
+                [result.poses[n] for n in common],
+                [reference.poses[n] for n in common],
+                length=reference_length(reference, result.names),
+            )
         except ValueError:
             errors = {}
         out.update(errors)

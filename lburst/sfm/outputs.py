@@ -38,12 +38,22 @@ def keyframe_times(out: Path) -> dict[str, float]:
 
 def write_trajectory(result: "ReconstructionResult", times: dict[str, float], path: Path) -> Path:
     names = [n for n in result.registered if n in times]
-    return write_tum(path, [times[n] for n in names], [result.poses[n] for n in names],
-                     header=f"lburst reconstruct {result.scene} ({result.method}): keyframes, model frame")
+    return write_tum(
+        path,
+        [times[n] for n in names],
+        [result.poses[n] for n in names],
+        header=f"lburst reconstruct {result.scene} ({result.method}): keyframes, model frame",
+    )
 
 
-def write_hloc(out: Path, names: list[str], features: list[dict], shapes: list[tuple[int, int]],
-               pairs: list[tuple[int, int]], matches: list[np.ndarray]) -> None:
+def write_hloc(
+    out: Path,
+    names: list[str],
+    features: list[dict],
+    shapes: list[tuple[int, int]],
+    pairs: list[tuple[int, int]],
+    matches: list[np.ndarray],
+) -> None:
     """hloc's ``features.h5``, ``matches.h5`` and ``pairs.txt`` (module docstring), each written atomically."""
     import h5py
 
@@ -84,8 +94,15 @@ def _plot_trajectory(result: "ReconstructionResult", path: Path) -> None:
         common = [n for n in names if n in centres]
         if len(common) >= 3:
             points = umeyama(np.array([est[n] for n in common]), np.array([centres[n] for n in common])).apply(points)
-    ax.plot(points[:, 0], points[:, 1], "o", ms=4, mfc="none", c="tab:blue",
-            label=f"{result.method}: {len(names)}/{len(result.names)} keyframes")
+    ax.plot(
+        points[:, 0],
+        points[:, 1],
+        "o",
+        ms=4,
+        mfc="none",
+        c="tab:blue",
+        label=f"{result.method}: {len(names)}/{len(result.names)} keyframes",
+    )
     if len(points):
         ax.plot(points[:1, 0], points[:1, 1], "g^", ms=9, label="first keyframe")
     ax.set_aspect("equal")
@@ -127,26 +144,46 @@ def write_report(result: "ReconstructionResult", times: dict[str, float], path: 
     _plot_trajectory(result, out / "trajectory.png")
     _plot_registration(result.names, points, out / "registration.png")
     m = result.metrics
-    lines = [f"# Reconstruction of {Path(result.scene).name}", "",
-             f"Method `{result.method}`; {len(result.registered)}/{len(result.names)} keyframes registered."]
+    lines = [
+        f"# Reconstruction of {Path(result.scene).name}",
+        "",
+        f"Method `{result.method}`; {len(result.registered)}/{len(result.names)} keyframes registered.",
+    ]
     if "ate_rmse" in m:
-        lines.append(f"ATE {m['ate_rmse']:.4f} m RMSE ({m.get('ate_percent', float('nan')):.3f} % of the path) "
-                     "after a Sim3 alignment to the ground truth.")
+        lines.append(
+            f"ATE {m['ate_rmse']:.4f} m RMSE ({m.get('ate_percent', float('nan')):.3f} % of the path) "
+            "after a Sim3 alignment to the ground truth."
+        )
     if result.source_error:
         lines.append(f"Reading the recording stopped early: {result.source_error}")
     if result.error:
         lines.append(f"COLMAP failed: {result.error}")
-    lines += ["", markdown_table([{"method": result.method, "scene": Path(result.scene).name, **m}]), "",
-              "![trajectory](trajectory.png)", "", "![registration](registration.png)", "",
-              "| keyframe | time (s) | registered | 3D points |", "|---|---|---|---|"]
-    lines += [f"| {n} | {times.get(n, float('nan')):.3f} | {'yes' if n in points else 'no'} | {points.get(n, 0)} |"
-              for n in result.names]
+    lines += [
+        "",
+        markdown_table([{"method": result.method, "scene": Path(result.scene).name, **m}]),
+        "",
+        "![trajectory](trajectory.png)",
+        "",
+        "![registration](registration.png)",
+        "",
+        "| keyframe | time (s) | registered | 3D points |",
+        "|---|---|---|---|",
+    ]
+    lines += [
+        f"| {n} | {times.get(n, float('nan')):.3f} | {'yes' if n in points else 'no'} | {points.get(n, 0)} |"
+        for n in result.names
+    ]
     with atomic_path(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
 
 
-def write_recording_outputs(result: "ReconstructionResult", features: list[dict], shapes: list[tuple[int, int]],
-                            pairs: list[tuple[int, int]], matches: list[np.ndarray]) -> None:
+def write_recording_outputs(
+    result: "ReconstructionResult",
+    features: list[dict],
+    shapes: list[tuple[int, int]],
+    pairs: list[tuple[int, int]],
+    matches: list[np.ndarray],
+) -> None:
     """``trajectory.tum``, hloc's files and the report of a recording's reconstruction (module docstring)."""
     out = Path(result.out_dir)
     times = keyframe_times(out)

@@ -94,8 +94,9 @@ def _stats(errors: np.ndarray) -> dict[str, float]:
     }
 
 
-def trajectory_errors(estimated: list[Pose], reference: list[Pose], with_scale: bool = True,
-                      length: float | None = None) -> dict[str, float]:
+def trajectory_errors(
+    estimated: list[Pose], reference: list[Pose], with_scale: bool = True, length: float | None = None
+) -> dict[str, float]:
     """ATE and RPE (module docstring) of ``estimated`` against ``reference`` poses, matched by position.
 
     Both lists are in trajectory order; RPE uses consecutive entries.  ``length`` (the
@@ -120,9 +121,14 @@ def trajectory_errors(estimated: list[Pose], reference: list[Pose], with_scale: 
         trans.append(np.linalg.norm(E[:3, 3]))
         rot.append(np.degrees(Rotation.from_matrix(E[:3, :3]).magnitude()))
     trans_a, rot_a = np.array(trans), np.array(rot)
-    out.update(rpe_trans_rmse=float(np.sqrt(np.mean(trans_a**2))), rpe_trans_mean=float(trans_a.mean()),
-               rpe_rot_rmse_deg=float(np.sqrt(np.mean(rot_a**2))), rpe_rot_mean_deg=float(rot_a.mean()),
-               scale=sim.scale, num_poses=len(estimated))
+    out.update(
+        rpe_trans_rmse=float(np.sqrt(np.mean(trans_a**2))),
+        rpe_trans_mean=float(trans_a.mean()),
+        rpe_rot_rmse_deg=float(np.sqrt(np.mean(rot_a**2))),
+        rpe_rot_mean_deg=float(rot_a.mean()),
+        scale=sim.scale,
+        num_poses=len(estimated),
+    )
     if length:
         out["ate_percent"] = 100.0 * out["ate_rmse"] / length
     return out

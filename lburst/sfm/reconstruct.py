@@ -115,7 +115,9 @@ class ReconstructionResult:
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
-        data["poses"] = {n: {"R": np.asarray(R).tolist(), "t": np.asarray(t).tolist()} for n, (R, t) in self.poses.items()}
+        data["poses"] = {
+            n: {"R": np.asarray(R).tolist(), "t": np.asarray(t).tolist()} for n, (R, t) in self.poses.items()
+        }
         return data
 
     def save(self, path: str | Path | None = None) -> Path:
@@ -168,8 +170,9 @@ def load_features(path: Path, key) -> tuple[Features, tuple[int, int]] | None:
     return None if found is None else (found[0], found[1][::-1])
 
 
-def scene_features(scene: Scene, spec: str, out: Path, progress: bool = True,
-                   extractor=None) -> tuple[list[Features], list[tuple[int, int]]]:
+def scene_features(
+    scene: Scene, spec: str, out: Path, progress: bool = True, extractor=None
+) -> tuple[list[Features], list[tuple[int, int]]]:
     """Features and image size (H, W) of each item's common frame; writes ``out/images/<name>.png`` too."""
     features, shapes = [], []
     method = store.method_key(spec)
@@ -200,8 +203,9 @@ def scene_features(scene: Scene, spec: str, out: Path, progress: bool = True,
     return features, shapes
 
 
-def recording_features(path: str | Path, spec: str, out: Path, opts: ReconstructOptions, extractor=None
-                       ) -> tuple[Scene, list[Features], list[tuple[int, int]], str | None]:
+def recording_features(
+    path: str | Path, spec: str, out: Path, opts: ReconstructOptions, extractor=None
+) -> tuple[Scene, list[Features], list[tuple[int, int]], str | None]:
     """The keyframe scene of a recording (:mod:`lburst.sfm.recording`), the features and image
     size (H, W) of each keyframe, and why reading stopped early (or ``None``).  Features are
     cached as for bursts, keyed on the spec, the recording's content and its options."""
@@ -270,7 +274,9 @@ def check_reference(path: Path) -> dict[str, dict]:
     return cameras
 
 
-def scene_cameras(scene: Scene, shapes: list[tuple[int, int]], options: ReconstructOptions) -> tuple[list[dict], list[int]]:
+def scene_cameras(
+    scene: Scene, shapes: list[tuple[int, int]], options: ReconstructOptions
+) -> tuple[list[dict], list[int]]:
     """COLMAP camera priors (distinct dicts) and the camera index of every image (module docstring)."""
     from lburst.sfm.colmap import default_camera, exif_camera
 
@@ -298,8 +304,9 @@ def scene_cameras(scene: Scene, shapes: list[tuple[int, int]], options: Reconstr
     return priors, list(range(len(priors)))
 
 
-def match_pairs(features: list[Features], pairs: list[tuple[int, int]], progress: bool = True,
-                matcher: str = "mnn") -> list[np.ndarray]:
+def match_pairs(
+    features: list[Features], pairs: list[tuple[int, int]], progress: bool = True, matcher: str = "mnn"
+) -> list[np.ndarray]:
     """Matches (M, 2) of each pair, by the matcher spec ``matcher`` (mutual nearest neighbours by default)."""
     from lburst.matching import create
 
@@ -307,8 +314,9 @@ def match_pairs(features: list[Features], pairs: list[tuple[int, int]], progress
     return [match(features[a], features[b]) for a, b in tqdm(pairs, desc="matching", disable=not progress, leave=False)]
 
 
-def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Path, extractor=None,
-                      **options: Any) -> ReconstructionResult:
+def reconstruct_scene(
+    scene_dir: str | Path, method_spec: str, out_dir: str | Path, extractor=None, **options: Any
+) -> ReconstructionResult:
     """Reconstruct ``scene_dir`` with features ``method_spec``; files and ``result.json`` go to ``out_dir``.
 
     ``options`` are :class:`ReconstructOptions` fields.  ``extractor`` (optional) is used
@@ -332,7 +340,9 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
         else:
             scene = list_scene(scene_dir)
         if len(scene.items) < 2:
-            raise ReconstructionError(f"{scene_dir}: a reconstruction needs at least 2 images, found {len(scene.items)}")
+            raise ReconstructionError(
+                f"{scene_dir}: a reconstruction needs at least 2 images, found {len(scene.items)}"
+            )
         if not is_recording(scene_dir):
             features, shapes = scene_features(scene, method_spec, out, opts.progress, extractor)
         cameras, camera_of_image = scene_cameras(scene, shapes, opts)
@@ -344,7 +354,9 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
     if opts.retrieval and mode == "sequential":
         from lburst.sfm.retrieval import retrieval_pairs, vlad
 
-        loops = retrieval_pairs(vlad([f["descriptors"] for f in features], seed=opts.seed), opts.retrieval, opts.overlap)
+        loops = retrieval_pairs(
+            vlad([f["descriptors"] for f in features], seed=opts.seed), opts.retrieval, opts.overlap
+        )
         pairs = sorted(set(pairs) | set(loops))
     matches = match_pairs(features, pairs, opts.progress, opts.matcher)
     # a recording's meta.json camera is its calibration: one camera, held fixed
@@ -352,8 +364,14 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
     if calibrated and all(cam == cameras[0] for cam in cameras):
         cameras, camera_of_image = cameras[:1], [0] * n
     fixed = opts.fix_intrinsics or calibrated
-    colmap_options = ColmapOptions(mapper=opts.mapper, num_threads=opts.num_threads, seed=opts.seed,
-                                   refine_focal_length=not fixed, refine_extra_params=not fixed, **opts.extra)
+    colmap_options = ColmapOptions(
+        mapper=opts.mapper,
+        num_threads=opts.num_threads,
+        seed=opts.seed,
+        refine_focal_length=not fixed,
+        refine_extra_params=not fixed,
+        **opts.extra,
+    )
     job = ColmapJob(scene.names, str((out / "images").resolve()), cameras, camera_of_image, colmap_options)
     job_dir = out / "colmap"
     job_dir.mkdir(parents=True, exist_ok=True)
@@ -362,9 +380,12 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
     for attempt in range(2):
         job.save(job_dir / "job.json")
         with atomic_path(job_dir / "input.npz") as tmp:
-            np.savez(tmp, pairs=np.array(pairs, dtype=np.int64).reshape(-1, 2),
-                     **{f"kp_{i}": f["keypoints"] for i, f in enumerate(features)},
-                     **{f"m_{p}": m for p, m in enumerate(matches)})
+            np.savez(
+                tmp,
+                pairs=np.array(pairs, dtype=np.int64).reshape(-1, 2),
+                **{f"kp_{i}": f["keypoints"] for i, f in enumerate(features)},
+                **{f"m_{p}": m for p, m in enumerate(matches)},
+            )
         try:
             summary = run_job_subprocess(job_dir)
             result.error = None
@@ -377,10 +398,16 @@ def reconstruct_scene(scene_dir: str | Path, method_spec: str, out_dir: str | Pa
         pairs, matches = pairs + extra, matches + match_pairs(features, extra, opts.progress, opts.matcher)
     verified = np.load(job_dir / "verified.npz") if (job_dir / "verified.npz").is_file() and not result.error else None
     inlier_counts = [len(verified[k]) for k in verified.files if k.startswith("inl_")] if verified is not None else []
-    result.metrics = scene_metrics(n, [len(f["keypoints"]) for f in features], [len(m) for m in matches],
-                                   inlier_counts, summary if not result.error else {})
-    result.metrics.update(pairs=len(pairs), pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive",
-                          matcher=opts.matcher)
+    result.metrics = scene_metrics(
+        n,
+        [len(f["keypoints"]) for f in features],
+        [len(m) for m in matches],
+        inlier_counts,
+        summary if not result.error else {},
+    )
+    result.metrics.update(
+        pairs=len(pairs), pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive", matcher=opts.matcher
+    )
     for name, image in summary.get("registered", {}).items():
         result.registered.append(name)
         result.poses[name] = (np.array(image["R"]), np.array(image["t"]))

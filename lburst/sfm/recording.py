@@ -62,16 +62,26 @@ def load_keyframes(out: Path, key: str) -> list[Keyframe] | None:
 
 
 def save_keyframes(out: Path, key: str, recording: Recording, keyframes: list[Keyframe], error: str | None) -> None:
-    data = {"recording": str(recording.path), "key": key, "complete": error is None, "error": error,
-            "fps": recording.fps, "gain": recording.gain, "options": recording.options.signature(),
-            "frames_read": recording.frames_read, "read_seconds": round(recording.read_seconds, 3),
-            "read_fps": round(recording.frames_read / recording.read_seconds, 1) if recording.read_seconds else None,
-            "keyframes": [{"name": k.name, "index": k.index, "time": k.time, "filled": k.filled} for k in keyframes]}
+    data = {
+        "recording": str(recording.path),
+        "key": key,
+        "complete": error is None,
+        "error": error,
+        "fps": recording.fps,
+        "gain": recording.gain,
+        "options": recording.options.signature(),
+        "frames_read": recording.frames_read,
+        "read_seconds": round(recording.read_seconds, 3),
+        "read_fps": round(recording.frames_read / recording.read_seconds, 1) if recording.read_seconds else None,
+        "keyframes": [{"name": k.name, "index": k.index, "time": k.time, "filled": k.filled} for k in keyframes],
+    }
     with atomic_path(out / KEYFRAMES_FILE) as tmp:
         tmp.write_text(json.dumps(data, indent=1))
 
 
-def stream_keyframes(recording: Recording, cached, found: list[Keyframe]) -> Iterator[tuple[Keyframe, np.ndarray | None]]:
+def stream_keyframes(
+    recording: Recording, cached, found: list[Keyframe]
+) -> Iterator[tuple[Keyframe, np.ndarray | None]]:
     """``(keyframe, burst)`` for every keyframe, ``burst`` ``None`` when ``cached(name)``; each keyframe
     is appended to ``found`` as it comes (so the caller keeps them when the recording fails later)."""
     for keyframe, burst in recording.bursts():
@@ -90,8 +100,12 @@ def keyframe_scene(recording: Recording, keyframes: list[Keyframe], out: Path) -
         matched = {name: pose for name, pose in matched.items() if pose is not None}
         if matched:
             centres = np.array([-R.T @ t for R, t in matched.values()])
-            reference = Reference(source=f"ground truth {recording.ground_truth.name}", camera=dict(recording.camera),
-                                  poses=matched, length=path_length(centres))
+            reference = Reference(
+                source=f"ground truth {recording.ground_truth.name}",
+                camera=dict(recording.camera),
+                poses=matched,
+                length=path_length(centres),
+            )
             reference_path = out / "reference.json"
             reference.save(reference_path)
     return Scene(recording.path, items, reference_path, camera=recording.camera)

@@ -119,7 +119,9 @@ def load_item(item: SceneItem) -> np.ndarray:
 
 def exif_source(item: SceneItem) -> Path | None:
     """The file whose EXIF may give a focal length prior: the image of a single-image item."""
-    return item.path if item.kind == "image" and item.path.suffix.lower() in (".jpg", ".jpeg", ".tif", ".tiff") else None
+    return (
+        item.path if item.kind == "image" and item.path.suffix.lower() in (".jpg", ".jpeg", ".tif", ".tiff") else None
+    )
 
 
 def reference_cameras(path: str | Path) -> dict[str, dict]:
@@ -141,5 +143,9 @@ def save_reference(reference: Reference, path: str | Path, cameras: dict[str, di
 
 
 def _camera_json(camera: dict) -> dict:
-    return {"model": str(camera["model"]), "width": int(camera["width"]), "height": int(camera["height"]),
-            "params": [float(v) for v in camera["params"]]}
+    return {
+        "model": str(camera["model"]),
+        "width": int(camera["width"]),
+        "height": int(camera["height"]),
+        "params": [float(v) for v in camera["params"]],
+    }

@@ -50,7 +50,8 @@ def list_photos(folders: list[str | Path], split: Split = "train") -> list[Path]
         photos += [p for p in found if split == "all" or is_validation_photo(p) == (split == "validation")]
     if not photos:
         raise FileNotFoundError(
-            f"no {split} photos ({', '.join(sorted(IMAGE_SUFFIXES))}) under {', '.join(map(str, folders))}")
+            f"no {split} photos ({', '.join(sorted(IMAGE_SUFFIXES))}) under {', '.join(map(str, folders))}"
+        )
     return photos
 
 

@@ -15,6 +15,9 @@ def export_weights(run_checkpoint: str | Path, out: str | Path, **meta) -> Path:
     state = torch.load(run_checkpoint, map_location="cpu", weights_only=True)
     net = LBurstNet(config_from_net_string(state["net"]))
     net.load_state_dict(state["state_dict"])
-    save_checkpoint(net, out, meta={"step": int(state["step"]), "seconds": float(state["seconds"]),
-                                    "config": state["config"], **meta})
+    save_checkpoint(
+        net,
+        out,
+        meta={"step": int(state["step"]), "seconds": float(state["seconds"]), "config": state["config"], **meta},
+    )
     return Path(out)

@@ -137,9 +137,18 @@ PRESETS["gpu"] = dict(PRESETS["cpu"], batch_size=8, steps=100000, workers=7, che
 PRESETS["burst"] = dict(
     PRESETS["cpu"],
     distill_weight=1.0,
-    pair=PairConfig(noise_variance=None, noise_std=(25.0, 120.0), dark_prob=0.3, gamma_range=(0.8, 1.25),
-                    max_burst_motion=12.0, burst_rotation_deg=1.0, burst_zoom=0.01, burst_flow_px=1.0,
-                    lowlight_prob=0.33, lowlight_photons=(3.0, 60.0)),
+    pair=PairConfig(
+        noise_variance=None,
+        noise_std=(25.0, 120.0),
+        dark_prob=0.3,
+        gamma_range=(0.8, 1.25),
+        max_burst_motion=12.0,
+        burst_rotation_deg=1.0,
+        burst_zoom=0.01,
+        burst_flow_px=1.0,
+        lowlight_prob=0.33,
+        lowlight_photons=(3.0, 60.0),
+    ),
 )
 #: ``aligned``: the ``burst`` recipe for a network that reads bursts aligned by
 #: ``align+lburst``: every training frame is warped back by its shift plus a 0.25 px
@@ -158,9 +167,16 @@ def _normalise(burst: torch.Tensor) -> torch.Tensor:
 
 
 def training_step(
-    net: torch.nn.Module, batch: dict[str, torch.Tensor], patch: int, generator: torch.Generator | None = None,
-    ap_weight: float = 0.0, precision: str = "fp32", rel_logit_weight: float = 0.0, rel_logit_margin: float = 4.0,
-    distill_weight: float = 0.0, teacher: torch.nn.Module | None = None,
+    net: torch.nn.Module,
+    batch: dict[str, torch.Tensor],
+    patch: int,
+    generator: torch.Generator | None = None,
+    ap_weight: float = 0.0,
+    precision: str = "fp32",
+    rel_logit_weight: float = 0.0,
+    rel_logit_margin: float = 4.0,
+    distill_weight: float = 0.0,
+    teacher: torch.nn.Module | None = None,
     memory_format: torch.memory_format = torch.channels_last,
 ) -> dict[str, torch.Tensor]:
     """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``).
@@ -244,9 +260,16 @@ def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds:
     write_checkpoint(state, path)
 
 
-def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, resume: bool = False,
-          device: str | None = None, progress: bool = True, precision: str | None = None,
-          memory_format: str = "auto") -> Path:
+def train(
+    photo_folders: list[str | Path],
+    out: str | Path,
+    cfg: TrainConfig,
+    resume: bool = False,
+    device: str | None = None,
+    progress: bool = True,
+    precision: str | None = None,
+    memory_format: str = "auto",
+) -> Path:
     """Train (or resume) a run in folder ``out``; returns the path of ``last.pt``.
     ``precision`` (if given) replaces the run's own, also on resume: native bf16 is a
     property of the machine the run continues on, not of the recipe; so is
@@ -269,9 +292,17 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     if resume:
         state = load_state(last)
         saved = _config_from_dict(dict(state["config"]))
-        cfg = replace(saved, time_budget_s=cfg.time_budget_s, steps=cfg.steps, epochs=cfg.epochs,
-                      workers=cfg.workers, threads=cfg.threads, checkpoint_every_s=cfg.checkpoint_every_s,
-                      snapshot_every=cfg.snapshot_every or saved.snapshot_every, tensorboard=cfg.tensorboard)
+        cfg = replace(
+            saved,
+            time_budget_s=cfg.time_budget_s,
+            steps=cfg.steps,
+            epochs=cfg.epochs,
+            workers=cfg.workers,
+            threads=cfg.threads,
+            checkpoint_every_s=cfg.checkpoint_every_s,
+            snapshot_every=cfg.snapshot_every or saved.snapshot_every,
+            tensorboard=cfg.tensorboard,
+        )
     elif last.is_file():
         raise FileExistsError(f"{last} exists: pass --resume to continue it, or choose another --out")
     if precision is not None:  # a property of the machine, not of the recipe: a resumed run may change it
@@ -288,7 +319,9 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
         if init_net.config.frames == 1 and cfg.frames > 1:
             init_net = replicate_frames(init_net, cfg.frames)
         if init_net.config.frames != cfg.frames:
-            raise ValueError(f"{cfg.init}: a {init_net.config.frames}-frame network, but the run has {cfg.frames} frames")
+            raise ValueError(
+                f"{cfg.init}: a {init_net.config.frames}-frame network, but the run has {cfg.frames} frames"
+            )
         net.load_state_dict(init_net.state_dict())
     layout = training_memory_format(device, memory_format)
     net = net.to(device).to(memory_format=layout)
@@ -323,8 +356,10 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
     def checkpoint() -> None:  # rank 0: the log, then the resumable state, atomically
         _write_log(out / "log.csv", log)  # first: a resume reads the log only up to the state's step
         save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
-    bar = tqdm(total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main),
-               dynamic_ncols=True)
+
+    bar = tqdm(
+        total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main), dynamic_ncols=True
+    )
     data = iter(loader)
     previous = _stop_on_sigterm()
     try:
@@ -332,10 +367,19 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
                 break
             batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
-            losses = training_step(model, batch, cfg.patch, generator, ap_weight=cfg.ap_weight,
-                                   precision=cfg.precision, rel_logit_weight=cfg.rel_logit_weight,
-                                   rel_logit_margin=cfg.rel_logit_margin, distill_weight=cfg.distill_weight,
-                                   teacher=net, memory_format=layout)
+            losses = training_step(
+                model,
+                batch,
+                cfg.patch,
+                generator,
+                ap_weight=cfg.ap_weight,
+                precision=cfg.precision,
+                rel_logit_weight=cfg.rel_logit_weight,
+                rel_logit_margin=cfg.rel_logit_margin,
+                distill_weight=cfg.distill_weight,
+                teacher=net,
+                memory_format=layout,
+            )
             optimizer.zero_grad(set_to_none=True)
             losses["loss"].backward()
             optimizer.step()
@@ -343,8 +387,13 @@ def train(photo_folders: list[str | Path], out: str | Path, cfg: TrainConfig, re
             step += 1
             if not ctx.main:
                 continue
-            log.append({"step": step, "seconds": round(seconds + time.monotonic() - started, 2),
-                        **{k: round(values[k], 5) for k in losses}})
+            log.append(
+                {
+                    "step": step,
+                    "seconds": round(seconds + time.monotonic() - started, 2),
+                    **{k: round(values[k], 5) for k in losses},
+                }
+            )
             bar.update(1)
             bar.set_postfix({k: f"{values[k]:.3f}" for k in losses})
             if writer is not None:
@@ -404,17 +453,30 @@ def load_state(path: Path) -> dict:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # truncated, empty, not a torch file
-        raise CheckpointError(f"{path}: not a readable training state ({type(exc).__name__}: {exc}); "
-                              f"restore it or start a new run in another --out") from exc
-    missing = [k for k in ("state_dict", "optimizer", "step", "config") if not isinstance(state, dict) or k not in state]
+        raise CheckpointError(
+            f"{path}: not a readable training state ({type(exc).__name__}: {exc}); "
+            f"restore it or start a new run in another --out"
+        ) from exc
+    missing = [
+        k for k in ("state_dict", "optimizer", "step", "config") if not isinstance(state, dict) or k not in state
+    ]
     if missing:
         raise CheckpointError(f"{path}: not a training state (lacks {', '.join(missing)})")
     return state
 
 
 #: Settings that a resumed run takes from the command line; the others stay the run's own.
-RESUME_OVERRIDES = ("steps", "epochs", "time_budget_s", "workers", "threads", "checkpoint_every_s",
-                    "snapshot_every", "tensorboard", "precision")
+RESUME_OVERRIDES = (
+    "steps",
+    "epochs",
+    "time_budget_s",
+    "workers",
+    "threads",
+    "checkpoint_every_s",
+    "snapshot_every",
+    "tensorboard",
+    "precision",
+)
 
 
 def check_resume_options(out: str | Path, given: dict) -> None:
@@ -424,8 +486,10 @@ def check_resume_options(out: str | Path, given: dict) -> None:
         saved = json.loads((Path(out) / "config.json").read_text())
     except (OSError, ValueError):
         return  # no record to compare with; the run's last.pt is checked when it is loaded
-    ignored = [f"--{name.removesuffix('_s').replace('_', '-')} {value} (the run has {saved[name]})"
-               for name, value in given.items()
-               if value is not None and name not in RESUME_OVERRIDES and name in saved and saved[name] != value]
+    ignored = [
+        f"--{name.removesuffix('_s').replace('_', '-')} {value} (the run has {saved[name]})"
+        for name, value in given.items()
+        if value is not None and name not in RESUME_OVERRIDES and name in saved and saved[name] != value
+    ]
     if ignored:
         raise ValueError(f"{out}: a resumed run keeps its own settings; leave out {', '.join(ignored)}")

@@ -20,7 +20,9 @@ def warp_to_a(map_b: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
     return F.grid_sample(map_b, grid, mode="bilinear", padding_mode="border", align_corners=False)
 
 
-def cosim_loss(rep_a: torch.Tensor, rep_b: torch.Tensor, flow: torch.Tensor, mask: torch.Tensor, patch: int = 16) -> torch.Tensor:
+def cosim_loss(
+    rep_a: torch.Tensor, rep_b: torch.Tensor, flow: torch.Tensor, mask: torch.Tensor, patch: int = 16
+) -> torch.Tensor:
     """1 - mean cosine similarity of ``patch`` x ``patch`` patches (stride patch/2) of A's
     repeatability and B's warped onto A; pixels outside the overlap are left out and patches
     more than half outside it are skipped."""
@@ -146,7 +148,9 @@ def reliability_ap_loss(
 
     # distractors: a regular grid of B
     s = cfg.distractor_stride
-    gy, gx = torch.meshgrid(torch.arange(s // 2, h, s, device=dev), torch.arange(s // 2, w, s, device=dev), indexing="ij")
+    gy, gx = torch.meshgrid(
+        torch.arange(s // 2, h, s, device=dev), torch.arange(s // 2, w, s, device=dev), indexing="ij"
+    )
     gx, gy = gx.reshape(-1), gy.reshape(-1)
     grid_desc = desc_b.permute(0, 2, 3, 1)[:, gy, gx]  # (B, G, D)
     far_scores = torch.einsum("qd,qgd->qg", query, grid_desc[batch])
@@ -162,7 +166,6 @@ def reliability_ap_loss(
     rel = rel_a[batch, 0, qy, qx]
     loss = 1 - ap * rel - (1 - rel) * cfg.base
     return loss.mean(), ap.mean()
-
 
 
 def logit_margin_loss(logits: torch.Tensor, margin: float = 4.0) -> torch.Tensor:

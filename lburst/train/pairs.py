@@ -176,7 +176,10 @@ def _render(photo: np.ndarray, to_photo: np.ndarray, crop: int, motion: BurstMot
         if motion.is_translation:  # one exact homography per frame
             m = to_photo @ _translation(-k * motion.shift[0], -k * motion.shift[1])
             out[i] = cv2.warpPerspective(
-                photo, m, (crop, crop), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                photo,
+                m,
+                (crop, crop),
+                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                 borderMode=cv2.BORDER_REFLECT_101,
             )
             continue
