@@ -1,7 +1,7 @@
 """Optional dependencies, imported when first used.
 
 ``pip install lburst`` gives feature extraction (numpy, torch, opencv, scipy, h5py,
-tqdm). The rest comes with extras: ``lburst[sfm]`` (pycolmap, scikit-image),
+tqdm, scikit-image). The rest comes with extras: ``lburst[sfm]`` (pycolmap, scikit-image),
 ``lburst[onnx]`` (onnx, onnxruntime, onnxscript), ``lburst[viz]`` (matplotlib),
 ``lburst[tensorboard]``. A module that needs one calls :func:`require`, or holds a
 :class:`LazyModule`, so that importing it costs nothing and a missing package gives a

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from skimage import data
 
+from lburst.align import estimate_shifts, fit_linear
 from lburst.features import check_features
 from lburst.methods import create
-from lburst.methods.align import estimate_shifts, fit_linear
 from lburst.methods.merge import MergeThen, merge_burst
 from lburst.noise import GaussianNoise
 from lburst.simulate import simulate_burst
@@ -99,7 +99,7 @@ def test_bad_arguments():
 
 
 def test_align_wrapper_removes_the_burst_motion_before_the_inner_method():
-    from lburst.methods.merge import align_burst
+    from lburst.align import align_burst
 
     burst = moving_burst(VELOCITY, 10.0)
     aligned = align_burst(burst)
@@ -122,7 +122,7 @@ def test_align_wrapper_removes_the_burst_motion_before_the_inner_method():
 
 
 def test_weights_trained_on_aligned_bursts_align_them_before_the_network(tmp_path):
-    from lburst.methods.merge import align_burst
+    from lburst.align import align_burst
     from lburst.model.extractor import LBurst
     from lburst.model.network import load_checkpoint, save_checkpoint
     from lburst.weights import weights_path
@@ -137,3 +137,29 @@ def test_weights_trained_on_aligned_bursts_align_them_before_the_network(tmp_pat
     plain = create(f"lburst:{tmp_path / 'plain.pt'}", device="cpu")
     np.testing.assert_array_equal(ours["keypoints"], plain(align_burst(burst))["keypoints"])
     assert not np.array_equal(ours["keypoints"], plain(burst)["keypoints"])
+
+
+def test_the_python_api_aligns_as_the_method_does(tmp_path):
+    from lburst.align import align_burst
+    from lburst.model.extractor import LBurst
+    from lburst.model.network import load_checkpoint, save_checkpoint
+    from lburst.weights import weights_path
+
+    net, _ = load_checkpoint(weights_path("lburst-b5"))
+    save_checkpoint(net, tmp_path / "aligned.pt", meta={"input": "aligned"})
+    aligned_model = LBurst.from_checkpoint(tmp_path / "aligned.pt", device="cpu")
+    plain_model = LBurst.from_checkpoint(tmp_path / "aligned.pt", device="cpu", align=False)
+    burst = moving_burst(VELOCITY, 10.0, size=128)
+    ours, plain = aligned_model.extract(burst), plain_model.extract(align_burst(burst))
+    np.testing.assert_array_equal(ours["keypoints"], plain["keypoints"])
+    np.testing.assert_array_equal(ours["descriptors"], plain["descriptors"])
+    np.testing.assert_array_equal(
+        aligned_model.dense(burst)["reliability"], plain_model.dense(align_burst(burst))["reliability"]
+    )
+
+
+def test_the_shipped_burst_weights_run_on_aligned_bursts():
+    from lburst.model.extractor import LBurst
+
+    assert LBurst.pretrained("lburst-b5", device="cpu").align
+    assert not LBurst.pretrained("lburst-b1", device="cpu").align  # one frame: nothing to align

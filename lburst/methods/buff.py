@@ -43,9 +43,9 @@ import cv2
 import numpy as np
 
 from lburst.features import Features, empty_features
+from lburst.frames import gray_unit, time_offsets
 from lburst.methods import register, sift_describe
 from lburst.methods.buff_scale import OctaveStack, frame_pyramids
-from lburst.methods.frames import gray_unit, time_offsets
 
 BORDER = 5  # pixels kept from the octave's border, as SIFT
 MAX_REFINE_STEPS = 5

@@ -86,10 +86,6 @@ class LearnedExtractor:
         self.name = "lburst"
 
     def __call__(self, burst: np.ndarray) -> Features:
-        if self.model.align and np.asarray(burst).dtype in (np.uint8, np.uint16):
-            from lburst.methods.merge import align_burst  # weights trained on aligned bursts
-
-            burst = align_burst(burst)
         return self.model.extract(burst, top_k=self.top_k, **self.options)
 
 

@@ -6,7 +6,7 @@ uint8, 0..65535 for uint16); :class:`MergeThen` rounds and clips it back to the 
 dtype and hands it to the inner extractor as a 1-frame burst.  Specs ``merge+sift``,
 ``merge+orb``, ``merge+r2d2:CKPT``, ``merge,reduce=median+sift`` build a
 :class:`MergeThen` through :func:`lburst.methods.create` (``merge`` is a registered
-wrapper with :class:`MergeOptions`).  Shift convention: see :mod:`lburst.methods.align`.
+wrapper with :class:`MergeOptions`).  Shift convention: see :mod:`lburst.align`.
 """
 
 from __future__ import annotations
@@ -14,29 +14,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-import cv2
 import numpy as np
 
+from lburst.align import Method, Motion, align_burst, estimate_shifts, warp_frame
 from lburst.features import Extractor, Features
+from lburst.frames import check_burst, dtype_max
 from lburst.methods import register
-from lburst.methods.align import Method, Motion, estimate_shifts
-from lburst.methods.frames import check_burst, dtype_max
 
 Reduce = Literal["mean", "median"]
-
-
-def warp_frame(frame: np.ndarray, shift: np.ndarray, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
-    """Resample ``frame`` ``(H, W, C)`` onto the common frame: ``out(p) = frame(p + shift)`` (float32)."""
-    matrix = np.array([[1, 0, shift[0]], [0, 1, shift[1]]], np.float32)
-    h, w = frame.shape[:2]
-    out = cv2.warpAffine(
-        frame.astype(np.float32),
-        matrix,
-        (w, h),
-        flags=interpolation | cv2.WARP_INVERSE_MAP,
-        borderMode=cv2.BORDER_REPLICATE,
-    )
-    return out.reshape(frame.shape)
 
 
 def valid_mask(shape: tuple[int, int], shift: np.ndarray) -> np.ndarray:
@@ -58,7 +43,7 @@ def merge_burst(
 
     Args:
         burst: uint8/uint16 ``(N, H, W, 3)``, temporal order, N odd.
-        shifts: ``(N, 2)`` ``(dx, dy)`` per frame (see :mod:`lburst.methods.align`); given
+        shifts: ``(N, 2)`` ``(dx, dy)`` per frame (see :mod:`lburst.align`); given
             (e.g. the true ones, the "oracle" merge), nothing is estimated; otherwise
             :func:`estimate_shifts` with ``method`` and ``motion``.
         reduce: ``'mean'`` or ``'median'`` over the frames that cover each pixel.
@@ -127,23 +112,6 @@ class MergeOptions:
 def merge(inner: Extractor, options: MergeOptions) -> MergeThen:
     """Burst with Merge: align and average the frames, then run SPEC on the merged image."""
     return MergeThen(inner, method=options.method, motion=options.motion, reduce=options.reduce)
-
-
-def align_burst(
-    burst: np.ndarray, shifts: np.ndarray | None = None, method: Method = "ecc", motion: Motion = "linear"
-) -> np.ndarray:
-    """Every frame resampled onto the common frame (bilinear, replicated borders), rounded
-    to the burst's dtype: the burst as it would be without its motion (the estimated
-    shifts unless ``shifts`` are given).  The common frame is returned untouched."""
-    burst = check_burst(burst)
-    if shifts is None:
-        shifts = estimate_shifts(burst, method=method, motion=motion)
-    top = dtype_max(burst.dtype)
-    out = burst.copy()
-    for k in range(len(burst)):
-        if np.any(shifts[k] != 0):
-            out[k] = np.clip(np.rint(warp_frame(burst[k], np.asarray(shifts[k]))), 0, top).astype(burst.dtype)
-    return out
 
 
 class AlignThen:

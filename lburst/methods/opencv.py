@@ -17,8 +17,8 @@ import cv2
 import numpy as np
 
 from lburst.features import Features, empty_features
+from lburst.frames import check_burst, to_gray8
 from lburst.methods import register
-from lburst.methods.frames import check_burst, to_gray8
 
 
 def keypoints_to_features(

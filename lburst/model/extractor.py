@@ -20,6 +20,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from lburst.align import align_burst
 from lburst.features import Features
 from lburst.model.fast import FastLBurstNet, descriptors_at
 from lburst.model.network import LBurstNet, check_device, check_precision, load_checkpoint, normalize_burst
@@ -161,10 +162,10 @@ class LBurst:
     ) -> None:
         """``net``: the network; or ``runner`` (with ``frames``): any callable with the
         signature of :meth:`lburst.model.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session.
-        ``align``: the weights were trained on aligned bursts (their checkpoint says
-        ``meta['input'] == 'aligned'``): the ``lburst`` method (:mod:`lburst.methods.learned`)
-        then warps a burst's frames onto the common frame before :meth:`extract`, as
-        ``align+lburst`` does."""
+        ``align``: the weights are run on aligned bursts (their checkpoint says
+        ``meta['input'] == 'aligned'``): :meth:`extract` and :meth:`dense` warp a uint8 or
+        uint16 burst's frames onto the common frame first (:func:`lburst.align.align_burst`:
+        ECC shifts with a constant velocity), as ``align+lburst`` does."""
         if net is None and runner is None:
             raise ValueError("give a network or a runner")
         self.device = check_device(device)
@@ -235,6 +236,8 @@ class LBurst:
                 burst = burst[n // 2 : n // 2 + 1]  # single-image net: the common frame
             else:
                 raise ValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
+        if self.align and n == self.frames and burst.dtype in (np.uint8, np.uint16):
+            burst = align_burst(burst)
         return normalize_burst(burst[self._perm], self.device)
 
     @torch.inference_mode()

@@ -202,7 +202,7 @@ def _estimated_shifts(motion: BurstMotion, cfg: PairConfig, rng: np.random.Gener
 
 def _align(frames: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """Frames warped back by ``shifts`` (``out(p) = frame(p + shift)``), rounded and clipped."""
-    from lburst.methods.merge import warp_frame
+    from lburst.align import warp_frame
 
     out = frames.copy()
     for i, shift in enumerate(shifts):

@@ -1,6 +1,9 @@
-"""Translational alignment of burst frames to the common (middle) frame.
+"""Translational alignment of burst frames to the common (middle) frame: the shifts
+(:func:`estimate_shifts`) and the aligned burst (:func:`align_burst`), used by the
+``merge`` and ``align`` methods, BuFF, training pairs and :class:`lburst.LBurst` (for
+weights run on aligned bursts).
 
-Shift convention (used by :mod:`lburst.methods.merge` and :mod:`lburst.methods.buff`):
+Shift convention:
 ``shifts[k] = (dx, dy)`` in pixels means the scene point seen at ``(x, y)`` in the
 common frame appears at ``(x + dx, y + dy)`` in frame ``k``, i.e.
 ``frame_k(p + shifts[k]) ~ common(p)``; the common frame's shift is ``(0, 0)``.  A
@@ -16,7 +19,7 @@ import cv2
 import numpy as np
 
 from lburst.extras import require
-from lburst.methods.frames import gray_unit, time_offsets
+from lburst.frames import check_burst, dtype_max, gray_unit, time_offsets
 
 Method = Literal["phase", "ecc"]
 Motion = Literal["free", "linear"]
@@ -102,3 +105,34 @@ def estimate_shifts(burst: np.ndarray, method: Method = "phase", motion: Motion 
         if method == "ecc":
             shifts[k] = ecc_shift(frames[middle], frames[k], shifts[k])
     return fit_linear(shifts) if motion == "linear" else shifts
+
+
+def warp_frame(frame: np.ndarray, shift: np.ndarray, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
+    """Resample ``frame`` ``(H, W, C)`` onto the common frame: ``out(p) = frame(p + shift)`` (float32)."""
+    matrix = np.array([[1, 0, shift[0]], [0, 1, shift[1]]], np.float32)
+    h, w = frame.shape[:2]
+    out = cv2.warpAffine(
+        frame.astype(np.float32),
+        matrix,
+        (w, h),
+        flags=interpolation | cv2.WARP_INVERSE_MAP,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
+    return out.reshape(frame.shape)
+
+
+def align_burst(
+    burst: np.ndarray, shifts: np.ndarray | None = None, method: Method = "ecc", motion: Motion = "linear"
+) -> np.ndarray:
+    """Every frame resampled onto the common frame (bilinear, replicated borders), rounded
+    to the burst's dtype: the burst as it would be without its motion (the estimated
+    shifts unless ``shifts`` are given).  The common frame is returned untouched."""
+    burst = check_burst(burst)
+    if shifts is None:
+        shifts = estimate_shifts(burst, method=method, motion=motion)
+    top = dtype_max(burst.dtype)
+    out = burst.copy()
+    for k in range(len(burst)):
+        if np.any(shifts[k] != 0):
+            out[k] = np.clip(np.rint(warp_frame(burst[k], np.asarray(shifts[k]))), 0, top).astype(burst.dtype)
+    return out

@@ -1,4 +1,5 @@
-"""Burst input shared by the non-learned methods: validation, dtype scale, grayscale.
+"""Burst input shared by the alignment and the non-learned methods: validation, dtype scale,
+grayscale.
 
 A burst is a uint8 or uint16 array ``(N, H, W, 3)`` (RGB) in temporal order with N odd;
 frame ``N // 2`` is the common frame whose pixel grid all features refer to.  Frame
