@@ -135,3 +135,13 @@ def test_a_sequence_image_replaced_under_the_same_name_is_run_again(tmp_path):
     again, fresh = run("out"), run("fresh")
     assert again == fresh
     assert again[1] != first[1] and again[0] == first[0]  # pair (1, 3) changed, pair (1, 2) did not
+
+
+def test_every_k_th_sequence_in_name_order(tmp_path):
+    for name in ("a", "b", "c"):
+        _write_sequence(tmp_path / "data" / name, size=(96, 128))
+    results = run_homography_benchmark(tmp_path / "data", ["sift"], [0], tmp_path / "out", progress=False, every=2)
+    assert results["protocol"]["every"] == 2
+    assert sorted(results["methods"]["sift"]["sigma0"]["pairs"]) == ["a", "c"]
+    with pytest.raises(ValueError, match="every must be an integer >= 1"):
+        run_homography_benchmark(tmp_path / "data", ["sift"], [0], tmp_path / "out", progress=False, every=0)

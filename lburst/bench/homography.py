@@ -225,13 +225,17 @@ def run_homography_benchmark(
     progress: bool = True,
     motion: MotionRange = MotionRange(),
     matcher: str = "mnn",
+    every: int = 1,
 ) -> dict:
-    """Run the protocol, matching with the ``matcher`` spec; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``."""
+    """Run the protocol, matching with the ``matcher`` spec; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``.
+    ``every`` > 1 keeps every ``every``-th sequence in name order (the first, the ``every + 1``-th, ...)."""
     from lburst.matching import create
 
     out = Path(out)
     match = create(matcher)
-    folders = list_sequences(data)
+    if not isinstance(every, int) or every < 1:
+        raise ValueError(f"every must be an integer >= 1, got {every!r}")
+    folders = list_sequences(data)[::every]
     levels = noise_levels(list(sigmas), list(noise_specs), motion)
     runners = {spec: MethodRunner(spec, top_k) for spec in methods}
     results: dict = {
@@ -240,6 +244,7 @@ def run_homography_benchmark(
             "sigmas": list(sigmas),
             "noise_specs": list(noise_specs),
             "max_side": max_side,
+            "every": every,
             "top_k": top_k,
             "thresholds": list(THRESHOLDS),
             "burst_motion": asdict(motion),

@@ -35,6 +35,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         metavar="PX",
         help="largest std of the smooth non-uniform in-burst flow per frame (pixels)",
     )
+    p.add_argument(
+        "--every",
+        type=int,
+        default=1,
+        metavar="K",
+        help="use every K-th sequence in name order (the first, the K+1-th, ...): a quicker, fixed subset",
+    )
     add_matcher_argument(p)
 
 
@@ -51,6 +58,7 @@ def main(args: argparse.Namespace) -> int:
             args.top_k,
             motion=motion,
             matcher=args.matcher,
+            every=args.every,
         )
     except (FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
