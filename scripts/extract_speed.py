@@ -3,7 +3,10 @@
 Paths: ``plain`` (the network run as the published code runs it: NCHW, full-resolution
 128-D maps at every level), ``fast`` (lburst's default, same features), ``bf16``
 (bfloat16 autocast of the backbone, heads in fp32) and ``onnx`` (the fast network
-exported by ``lburst export onnx``, run by ONNX Runtime).  Each path runs in its own
+exported by ``lburst export onnx``, run by ONNX Runtime), and ``align`` (only the burst
+alignment, :func:`lburst.align.align_burst`, which ``LBurst`` runs before the network for
+weights that ask for it, as the shipped ``lburst-b5``: add it to a network path's time).
+The network paths run without alignment.  Each path runs in its own
 process so its peak memory can be read; times are medians of ``--repeats`` runs after
 one warm-up, on random weights unless ``--weights`` is given (the time does not depend
 on the weights, the keypoint count does).  ``bf16`` and ``onnx`` also report the share
@@ -27,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-PATHS = ("plain", "fast", "bf16", "onnx")
+PATHS = ("plain", "fast", "bf16", "onnx", "align")
 
 
 def _make_burst(size: tuple[int, int], frames: int) -> np.ndarray:
@@ -42,13 +45,14 @@ def _make_burst(size: tuple[int, int], frames: int) -> np.ndarray:
 
 
 def run_child(path: str, args: argparse.Namespace) -> dict:
+    from lburst.align import align_burst
     from lburst.model.extractor import LBurst
     from lburst.model.network import LBurstNet, NetConfig
 
     torch.set_num_threads(args.threads)
     device = args.device
     if args.weights:
-        model = LBurst.from_checkpoint(args.weights, device=device)
+        model = LBurst.from_checkpoint(args.weights, device=device, align=False)
     else:
         torch.manual_seed(0)
         model = LBurst(LBurstNet(NetConfig(frames=5)), device=device)
@@ -65,12 +69,12 @@ def run_child(path: str, args: argparse.Namespace) -> dict:
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         start = time.perf_counter()
-        feats = model.extract(burst, top_k=args.top_k, **options)
+        feats = align_burst(burst) if path == "align" else model.extract(burst, top_k=args.top_k, **options)
         if device.startswith("cuda"):
             torch.cuda.synchronize()
         if i:
             times.append(time.perf_counter() - start)
-        count = len(feats["scores"])
+        count = len(feats["scores"]) if path != "align" else 0
     rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     if path in ("bf16", "onnx"):  # agreement with fp32: share of keypoints within 1 px of an fp32 keypoint
         from scipy.spatial import cKDTree
