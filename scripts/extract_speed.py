@@ -170,7 +170,7 @@ def main() -> int:
     print("| path | s / burst | speed-up vs plain | keypoints | within 1 px of fp32 | peak RSS MB |")
     print("|---|---|---|---|---|---|")
     for r in results:
-        ratio = f"{base / r['median_s']:.2f}x" if base else "-"
+        ratio = f"{base / r['median_s']:.2f}x" if base and r["path"] != "align" else "-"  # align is no network path
         agree = "-" if r["agreement_1px"] is None else f"{r['agreement_1px']:.3f}"
         print(f"| {r['path']} | {r['median_s']:.2f} | {ratio} | {r['keypoints']} | {agree} | {r['peak_rss_mb']:.0f} |")
     if args.out:
