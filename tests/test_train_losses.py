@@ -154,3 +154,24 @@ def test_saturated_reliability_recovers_only_with_the_logit_margin_loss():
     assert g.abs().max() < 1e-12
     (g,) = torch.autograd.grad(rel_only + 0.01 * logit_margin_loss(z), net.clf.bias)
     assert g[1] < -0.1  # descent raises the class-1 logit
+
+
+def test_a_lower_base_keeps_pixels_reliable_whose_descriptors_still_match_under_noise():
+    """TrainConfig.rel_base: descent raises reliability where AP passes the base, lowers it elsewhere."""
+    torch.manual_seed(0)
+    h, w, dx, dy = 64, 64, 2, 1
+    big = F.normalize(torch.randn(1, 16, h + 10, w + 10), dim=1)
+    desc_a = big[..., 5 : 5 + h, 5 : 5 + w]
+    clean_b = big[..., 5 - dy : 5 - dy + h, 5 - dx : 5 - dx + w]
+    desc_b = F.normalize(clean_b + 0.6 * torch.randn(1, 16, h, w), dim=1)  # noisy: AP between the bases
+    flow, mask = _shift_flow(h, w, dx, dy)
+    grads = {}
+    for base in (0.5, 0.3):
+        rel = torch.full((1, 1, h, w), 0.5, requires_grad=True)
+        loss, ap = reliability_ap_loss(
+            desc_a, desc_b, rel, flow, mask, torch.Generator().manual_seed(0), APSampling(base=base)
+        )
+        loss.backward()
+        grads[base] = rel.grad.sum().item()
+    assert 0.3 < ap.item() < 0.5
+    assert grads[0.5] > 0 > grads[0.3]  # base 0.5: reliability goes down; base 0.3: up

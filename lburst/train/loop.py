@@ -70,6 +70,11 @@ class TrainConfig:
     it keeps a collapsed reliability from saturating, so it can recover once AP passes the
     base.  0 (the paper) leaves the logits free.
 
+    ``rel_base`` is R2D2's base AP (kappa): the reliability loss pushes a pixel's
+    reliability up where its AP passes it and down where it does not.  Under heavy noise
+    fewer pixels reach 0.5, so fewer pass the 0.7 keypoint threshold at test time; a lower
+    base keeps pixels whose descriptors still match under that noise.
+
     ``snapshot_every`` (steps) also keeps the weights at every multiple of it as
     ``snapshots/step_XXXXXX.pt`` in the published layout (a few MB each), so the
     benchmark can follow a run's progress.
@@ -101,6 +106,7 @@ class TrainConfig:
     ap_weight: float = 0.0
     rel_logit_weight: float = 0.0
     rel_logit_margin: float = 4.0
+    rel_base: float = 0.5
     distill_weight: float = 0.0
     init: str | None = None
     seed: int = 0
@@ -175,6 +181,7 @@ def training_step(
     precision: str = "fp32",
     rel_logit_weight: float = 0.0,
     rel_logit_margin: float = 4.0,
+    rel_base: float = 0.5,
     distill_weight: float = 0.0,
     teacher: torch.nn.Module | None = None,
     memory_format: torch.memory_format = torch.channels_last,
@@ -193,7 +200,7 @@ def training_step(
     flow, mask = batch["flow"], batch["mask"]
     cosim = cosim_loss(rep[:n], rep[n:], flow, mask, patch)
     peaky = (peaky_loss(rep[:n], patch) + peaky_loss(rep[n:], patch)) / 2
-    reliability, ap = reliability_ap_loss(desc[:n], desc[n:], rel[:n], flow, mask, generator, APSampling())
+    reliability, ap = reliability_ap_loss(desc[:n], desc[n:], rel[:n], flow, mask, generator, APSampling(base=rel_base))
     loss = cosim + peaky + reliability + ap_weight * (1 - ap)
     if rel_logit_weight > 0:
         loss = loss + rel_logit_weight * logit_margin_loss(out["reliability_logits"].float(), rel_logit_margin)
@@ -376,6 +383,7 @@ def train(
                 precision=cfg.precision,
                 rel_logit_weight=cfg.rel_logit_weight,
                 rel_logit_margin=cfg.rel_logit_margin,
+                rel_base=cfg.rel_base,
                 distill_weight=cfg.distill_weight,
                 teacher=net,
                 memory_format=layout,
