@@ -163,3 +163,27 @@ def test_the_shipped_burst_weights_run_on_aligned_bursts():
 
     assert LBurst.pretrained("lburst-b5", device="cpu").align
     assert not LBurst.pretrained("lburst-b1", device="cpu").align  # one frame: nothing to align
+
+
+def test_align_wrapper_aligns_weights_that_align_themselves_only_once(tmp_path, monkeypatch):
+    import lburst.align
+    import lburst.methods.merge
+    import lburst.model.extractor
+    from lburst.model.network import load_checkpoint, save_checkpoint
+    from lburst.weights import weights_path
+
+    net, _ = load_checkpoint(weights_path("lburst-b5"))
+    save_checkpoint(net, tmp_path / "aligned.pt", meta={"input": "aligned"})
+    calls = []
+
+    def counting(burst, *args, **kwargs):
+        calls.append(1)
+        return lburst.align.align_burst(burst, *args, **kwargs)
+
+    monkeypatch.setattr(lburst.model.extractor, "align_burst", counting)
+    monkeypatch.setattr(lburst.methods.merge, "align_burst", counting)
+    burst = moving_burst(VELOCITY, 10.0, size=96)
+    create(f"align+lburst:{tmp_path / 'aligned.pt'}", device="cpu")(burst)
+    assert len(calls) == 1
+    create(f"lburst:{tmp_path / 'aligned.pt'}", device="cpu")(burst)
+    assert len(calls) == 2

@@ -116,9 +116,15 @@ def merge(inner: Extractor, options: MergeOptions) -> MergeThen:
 
 class AlignThen:
     """Extractor: align the burst's frames onto the common frame (:func:`align_burst`),
-    then run the burst method ``inner`` on the aligned burst."""
+    then run the burst method ``inner`` on the aligned burst.
+
+    The burst is aligned once, with these options: an ``inner`` network whose weights
+    align the burst themselves (:attr:`lburst.LBurst.align`) has that turned off."""
 
     def __init__(self, inner: Extractor, method: Method = "ecc", motion: Motion = "linear") -> None:
+        model = getattr(inner, "model", None)
+        if getattr(model, "align", False):
+            model.align = False
         self.inner = inner
         self.method = method
         self.motion = motion
