@@ -8,8 +8,16 @@ import sys
 from pathlib import Path
 
 from lburst.cli.options import add_matcher_argument, add_recording_arguments, recording_options
-from lburst.sfm.reconstruct import AUTO_EXHAUSTIVE_MAX, ReconstructionError, reconstruct_scene
-from lburst.sources import is_recording
+from lburst.sfm.reconstruct import (
+    AUTO_EXHAUSTIVE_MAX,
+    LOOP_FRACTION,
+    RECORDING_ABS_POSE_INLIERS,
+    RECORDING_OVERLAP,
+    RECORDING_RETRIEVAL,
+    SCENE_OVERLAP,
+    ReconstructionError,
+    reconstruct_scene,
+)
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -26,9 +34,33 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--pairs",
         choices=("auto", "exhaustive", "sequential"),
         default="auto",
-        help=f"image pairs to match (auto: exhaustive up to {AUTO_EXHAUSTIVE_MAX} images)",
+        help=f"image pairs to match (auto: for a scene exhaustive up to {AUTO_EXHAUSTIVE_MAX} images, "
+        "for a recording always sequential with retrieval loop candidates)",
     )
-    parser.add_argument("--overlap", type=int, default=10, help="sequential pairs: neighbours on each side")
+    parser.add_argument(
+        "--overlap",
+        type=int,
+        help=f"sequential pairs: neighbours on each side (default {SCENE_OVERLAP} for a scene, "
+        f"{RECORDING_OVERLAP} for a recording)",
+    )
+    parser.add_argument(
+        "--near",
+        type=int,
+        help="pairs farther apart than this (retrieval candidates) are kept only when their inlier count "
+        "passes the loop test (default: the overlap for a recording, no test for a scene)",
+    )
+    parser.add_argument(
+        "--loop-fraction",
+        type=float,
+        default=LOOP_FRACTION,
+        help="loop test: fewest inliers as a fraction of the adjacent pairs' median",
+    )
+    parser.add_argument(
+        "--abs-pose-inliers",
+        type=int,
+        help=f"fewest 2D-3D inliers to register an image (default {RECORDING_ABS_POSE_INLIERS} for a "
+        "recording, 30 for a scene)",
+    )
     parser.add_argument(
         "--fallback-exhaustive",
         action="store_true",
@@ -55,7 +87,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--retrieval",
         type=int,
         help="sequential pairs: also match each image with its N most similar images farther apart "
-        "(loop closure; default 5 for a recording, 0 for a scene)",
+        f"(loop closure; default {RECORDING_RETRIEVAL} for a recording, 0 for a scene)",
     )
     add_recording_arguments(parser)
 
@@ -77,7 +109,10 @@ def main(args: argparse.Namespace) -> int:
             num_threads=args.threads,
             seed=args.seed,
             matcher=args.matcher,
-            retrieval=args.retrieval if args.retrieval is not None else (5 if is_recording(args.scene) else 0),
+            retrieval=args.retrieval,
+            near=args.near,
+            loop_fraction=args.loop_fraction,
+            abs_pose_inliers=args.abs_pose_inliers,
             recording=recording_options(args),
         )
     except (ReconstructionError, ValueError) as err:

@@ -78,6 +78,13 @@ class ColmapOptions:
         min_model_size: fewest registered images for a model to be kept (3; COLMAP's 10
             would drop every model of a small scene).
         refine_focal_length, refine_extra_params: bundle adjustment of the intrinsics.
+        near: pairs of images more than this far apart in image order (a recording's
+            keyframes: time) are loop candidates, kept after verification only when they
+            pass :func:`loop_test`; 0: every verified pair is kept (COLMAP's behaviour).
+        loop_inlier_fraction: a loop candidate needs at least this fraction of the median
+            inlier count of the adjacent pairs (images 1 apart).
+        abs_pose_min_num_inliers: fewest 2D-3D inliers to register an image in incremental
+            mapping (COLMAP: 30).
     """
 
     mapper: str = "incremental"
@@ -89,6 +96,9 @@ class ColmapOptions:
     min_model_size: int = 3
     refine_focal_length: bool = True
     refine_extra_params: bool = True
+    near: int = 0
+    loop_inlier_fraction: float = 0.5
+    abs_pose_min_num_inliers: int = 30
 
 
 @dataclass
@@ -241,6 +251,38 @@ def read_inliers(db_path: str | Path, image_ids: list[int]) -> tuple[np.ndarray,
     return np.array(pairs, dtype=np.int64).reshape(-1, 2), inliers
 
 
+def loop_test(
+    pairs: np.ndarray, inlier_counts, near: int, fraction: float, min_inliers: int = 0
+) -> tuple[np.ndarray, float]:
+    """Which verified pairs ``(a, b)`` (image indices in trajectory order) to keep: all those
+    at most ``near`` apart, and farther ones (loop candidates) with at least ``threshold``
+    inliers; returns ``(keep (Q,) bool, threshold)``.
+
+    ``threshold`` is ``fraction`` times the median inlier count of the adjacent pairs
+    (``b - a == 1``; without one, of the pairs at most ``near`` apart), and at least
+    ``min_inliers``; with no such pair at all no loop candidate is kept.  COLMAP's own
+    test (a fixed count, 15) is too weak on noisy matches: images that share little or
+    nothing of the view still give 20-50 inliers that fit one epipolar geometry, as many
+    as true pairs farther apart, while the neighbours of a recording, which share most
+    of the view, give several times more.  ``near`` 0: everything is kept.
+    """
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    counts = np.asarray(inlier_counts, dtype=np.float64).reshape(-1)
+    if near < 1:
+        return np.ones(len(pairs), bool), 0.0
+    gap = pairs[:, 1] - pairs[:, 0]
+    reference = counts[gap == 1] if (gap == 1).any() else counts[gap <= near]
+    threshold = max(float(min_inliers), fraction * float(np.median(reference))) if len(reference) else np.inf
+    return (gap <= near) | (counts >= threshold), threshold
+
+
+def refuse_pairs(db_path: str | Path, image_ids: list[int], pairs: np.ndarray) -> None:
+    """Delete the two-view geometries of ``pairs`` (image indices) from the database, so the mapper does not use them."""
+    with pycolmap.Database.open(str(db_path)) as db:
+        for a, b in np.asarray(pairs).reshape(-1, 2):
+            db.delete_two_view_geometry(image_ids[a], image_ids[b])
+
+
 def map_database(
     db_path: str | Path, image_dir: str | Path, work_dir: str | Path, options: ColmapOptions
 ) -> pycolmap.Reconstruction | None:
@@ -253,6 +295,7 @@ def map_database(
         opts.num_threads = options.num_threads
         opts.random_seed = options.seed
         opts.min_model_size = options.min_model_size
+        opts.mapper.abs_pose_min_num_inliers = options.abs_pose_min_num_inliers
         opts.ba_refine_focal_length = options.refine_focal_length
         opts.ba_refine_extra_params = options.refine_extra_params
         models = pycolmap.incremental_mapping(str(db_path), str(image_dir), str(work_dir), opts)
@@ -327,8 +370,26 @@ def run_job(job_dir: str | Path) -> dict:
     verify(db_path, job.options)
     verified = time.perf_counter()
     v_pairs, inliers = read_inliers(db_path, image_ids)
+    keep, threshold = loop_test(
+        v_pairs,
+        [len(m) for m in inliers],
+        job.options.near,
+        job.options.loop_inlier_fraction,
+        job.options.min_num_inliers,
+    )
+    refused = v_pairs[~keep]
+    refused_counts = np.array([len(m) for m, k in zip(inliers, keep) if not k], dtype=np.int64)
+    if len(refused):
+        refuse_pairs(db_path, image_ids, refused)
+    v_pairs, inliers = v_pairs[keep], [m for m, k in zip(inliers, keep) if k]
     with atomic_path(job_dir / "verified.npz") as tmp:
-        np.savez(tmp, pairs=v_pairs, **{f"inl_{q}": m for q, m in enumerate(inliers)})
+        np.savez(
+            tmp,
+            pairs=v_pairs,
+            refused=refused,
+            refused_inliers=refused_counts,
+            **{f"inl_{q}": m for q, m in enumerate(inliers)},
+        )
     mapping = time.perf_counter()
     rec = map_database(db_path, job.image_dir, job_dir / "mapper", job.options) if len(v_pairs) else None
     mapped = time.perf_counter()
@@ -336,6 +397,8 @@ def run_job(job_dir: str | Path) -> dict:
         export_model(rec, job_dir)
     summary = summarize(rec)
     summary.update(verify_seconds=round(verified - start, 3), map_seconds=round(mapped - mapping, 3))
+    if job.options.near:
+        summary.update(loop_threshold=threshold if np.isfinite(threshold) else None, refused_pairs=refused.tolist())
     with atomic_path(job_dir / "output.json") as tmp:
         tmp.write_text(json.dumps(summary))
     return summary

@@ -3,7 +3,9 @@
 Pipeline (:func:`reconstruct_scene`): features of each burst's common frame with any
 method spec (cached in ``OUT/features/<name>.npz``, so an interrupted run resumes), the
 common frames written as ``OUT/images/<name>.png`` for COLMAP, image pairs (exhaustive,
-or sequential with an overlap for trajectories), mutual-nearest-neighbour matching, then
+or sequential with an overlap for trajectories; a recording's keyframes, which are ordered
+in time, always sequential plus retrieval loop candidates, see :func:`pair_plan`),
+mutual-nearest-neighbour matching, then
 COLMAP in a child process (:mod:`lburst.sfm.colmap`): database, geometric verification,
 mapping; the largest model is written to ``OUT/colmap/model`` (binary) and
 ``OUT/colmap/model.ply``, and ``OUT/result.json`` holds the metrics
@@ -35,7 +37,16 @@ from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, exif_source, list_scene, load_item, reference_cameras
 from lburst.sources import is_recording
 
-AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto': exhaustive up to this many images, else sequential
+AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto' for a scene: exhaustive up to this many images, else sequential
+SCENE_OVERLAP = 10  # sequential pairs of a scene: neighbours on each side
+# A recording (keyframes in time order), pairs='auto': sequential pairs with this overlap,
+# RECORDING_RETRIEVAL retrieval candidates per keyframe, the loop test (ColmapOptions.near)
+# for every pair farther apart than the overlap, and registration with at least
+# RECORDING_ABS_POSE_INLIERS 2D-3D inliers; docs/recordings.md has the measurements.
+RECORDING_OVERLAP = 3
+RECORDING_RETRIEVAL = 5
+LOOP_FRACTION = 0.5
+RECORDING_ABS_POSE_INLIERS = 15
 RESULT_FILE = "result.json"
 
 
@@ -49,7 +60,9 @@ class ReconstructOptions:
 
     Attributes:
         pairs: ``'exhaustive'``, ``'sequential'`` (neighbours up to ``overlap`` apart) or
-            ``'auto'`` (exhaustive up to 20 images, else sequential).
+            ``'auto'`` (a scene: exhaustive up to 20 images, else sequential; a recording:
+            always sequential, :func:`pair_plan`).
+        overlap: sequential pairs' reach; ``None``: 10 for a scene, 3 for a recording.
         fallback_exhaustive: rerun with every pair when sequential pairs leave images out.
         camera, camera_model, single_camera, fix_intrinsics: cameras (module docstring).
         mapper: ``'incremental'`` or ``'global'``.
@@ -57,7 +70,15 @@ class ReconstructOptions:
         progress: tqdm bars.
         extra: further :class:`lburst.sfm.colmap.ColmapOptions` fields, e.g. ``max_num_trials``.
         retrieval: with sequential pairs, also each image's this many most similar images
-            farther apart (loop-closure candidates, :mod:`lburst.sfm.retrieval`).
+            farther apart (loop-closure candidates, :mod:`lburst.sfm.retrieval`); ``None``:
+            5 for a recording, 0 for a scene.
+        near: pairs more than this many images apart must also pass the loop test after
+            COLMAP's verification (:func:`lburst.sfm.colmap.loop_test`); ``None``: the
+            overlap for a recording, 0 (no test) for a scene.
+        loop_fraction: the loop test's fraction of the adjacent pairs' median inlier count.
+        abs_pose_inliers: fewest 2D-3D inliers to register an image (incremental mapper);
+            ``None``: 15 for a recording (its camera is one, usually calibrated, and the
+            last keyframes of a dark recording have few tracks), COLMAP's 30 for a scene.
         recording: :class:`lburst.sources.RecordingOptions` for a scene that is a
             recording (video or frame folder); ``None``: the defaults.
         matcher: matcher spec (:mod:`lburst.matching`): ``'mnn'`` (mutual nearest
@@ -65,7 +86,7 @@ class ReconstructOptions:
     """
 
     pairs: str = "auto"
-    overlap: int = 10
+    overlap: int | None = None
     fallback_exhaustive: bool = False
     camera: str = "auto"
     camera_model: str = "SIMPLE_RADIAL"
@@ -76,7 +97,10 @@ class ReconstructOptions:
     seed: int = 0
     progress: bool = True
     extra: dict = field(default_factory=dict)
-    retrieval: int = 0
+    retrieval: int | None = None
+    near: int | None = None
+    loop_fraction: float = LOOP_FRACTION
+    abs_pose_inliers: int | None = None
     recording: Any = None
     matcher: str = "mnn"
 
@@ -314,6 +338,50 @@ def match_pairs(
     return [match(features[a], features[b]) for a, b in tqdm(pairs, desc="matching", disable=not progress, leave=False)]
 
 
+@dataclass(frozen=True)
+class PairPlan:
+    """Which pairs to match and verify (:func:`pair_plan`)."""
+
+    mode: str  # 'exhaustive' or 'sequential'
+    overlap: int  # sequential pairs: images at most this far apart
+    retrieval: int  # loop candidates per image (sequential only)
+    near: int  # pairs farther apart than this must pass the loop test; 0: no test
+    abs_pose_inliers: int  # incremental mapper: fewest 2D-3D inliers to register an image
+
+
+def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
+    """The pairs of ``n`` images by ``opts``, with the defaults of a scene or a recording.
+
+    A recording's keyframes are ordered in time, so ``pairs='auto'`` never means exhaustive
+    for one: every pair of a short recording (15 keyframes) would be matched, and on dark
+    noisy frames COLMAP verifies pairs of keyframes that share little of the view with as
+    many inliers as the true ones (docs/recordings.md).  It gets sequential pairs
+    (``RECORDING_OVERLAP``), ``RECORDING_RETRIEVAL`` retrieval candidates per keyframe,
+    the loop test for every pair farther apart than the overlap (the retrieval candidates,
+    or all far pairs of an explicit ``pairs='exhaustive'``) and registration from
+    ``RECORDING_ABS_POSE_INLIERS`` inliers.  A scene keeps exhaustive pairs up to
+    ``AUTO_EXHAUSTIVE_MAX`` images, sequential with overlap 10 beyond, no retrieval, no
+    loop test and COLMAP's 30, unless the options say otherwise.
+    """
+    if opts.pairs not in ("auto", "exhaustive", "sequential"):
+        raise ValueError(f"unknown pairing {opts.pairs!r}: expected 'auto', 'exhaustive' or 'sequential'")
+    if recording:
+        mode = "sequential" if opts.pairs == "auto" else opts.pairs
+        overlap = RECORDING_OVERLAP if opts.overlap is None else opts.overlap
+        retrieval = RECORDING_RETRIEVAL if opts.retrieval is None else opts.retrieval
+        near = overlap if opts.near is None else opts.near
+    else:
+        mode = opts.pairs if opts.pairs != "auto" else ("exhaustive" if n <= AUTO_EXHAUSTIVE_MAX else "sequential")
+        overlap = SCENE_OVERLAP if opts.overlap is None else opts.overlap
+        retrieval = opts.retrieval or 0
+        near = opts.near or 0
+    if overlap < 1:
+        raise ValueError(f"overlap must be at least 1, got {overlap}")
+    default_abs = RECORDING_ABS_POSE_INLIERS if recording else 30
+    abs_pose = default_abs if opts.abs_pose_inliers is None else opts.abs_pose_inliers
+    return PairPlan(mode, overlap, retrieval if mode == "sequential" else 0, max(near, 0), abs_pose)
+
+
 def reconstruct_scene(
     scene_dir: str | Path, method_spec: str, out_dir: str | Path, extractor=None, **options: Any
 ) -> ReconstructionResult:
@@ -349,13 +417,15 @@ def reconstruct_scene(
     except SceneError as err:
         raise ReconstructionError(str(err)) from err
     n = len(scene.items)
-    mode = opts.pairs if opts.pairs != "auto" else ("exhaustive" if n <= AUTO_EXHAUSTIVE_MAX else "sequential")
-    pairs = make_pairs(n, mode, opts.overlap)
-    if opts.retrieval and mode == "sequential":
+    plan = pair_plan(n, opts, is_recording(scene_dir))
+    mode = plan.mode
+    pairs = make_pairs(n, mode, plan.overlap)
+    loops: list[tuple[int, int]] = []
+    if plan.retrieval and mode == "sequential":
         from lburst.sfm.retrieval import retrieval_pairs, vlad
 
         loops = retrieval_pairs(
-            vlad([f["descriptors"] for f in features], seed=opts.seed), opts.retrieval, opts.overlap
+            vlad([f["descriptors"] for f in features], seed=opts.seed), plan.retrieval, plan.overlap
         )
         pairs = sorted(set(pairs) | set(loops))
     matches = match_pairs(features, pairs, opts.progress, opts.matcher)
@@ -370,7 +440,12 @@ def reconstruct_scene(
         seed=opts.seed,
         refine_focal_length=not fixed,
         refine_extra_params=not fixed,
-        **opts.extra,
+        **{
+            "near": plan.near,
+            "loop_inlier_fraction": opts.loop_fraction,
+            "abs_pose_min_num_inliers": plan.abs_pose_inliers,
+            **opts.extra,
+        },
     )
     job = ColmapJob(scene.names, str((out / "images").resolve()), cameras, camera_of_image, colmap_options)
     job_dir = out / "colmap"
@@ -406,8 +481,18 @@ def reconstruct_scene(
         summary if not result.error else {},
     )
     result.metrics.update(
-        pairs=len(pairs), pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive", matcher=opts.matcher
+        pairs=len(pairs),
+        pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive",
+        overlap=plan.overlap if mode == "sequential" else None,
+        loop_candidates=len(set(loops) - set(make_pairs(n, mode, plan.overlap))),
+        matcher=opts.matcher,
     )
+    if plan.near and not result.error:
+        result.metrics.update(
+            near=plan.near,
+            loop_threshold=summary.get("loop_threshold"),
+            refused_pairs=len(summary.get("refused_pairs", [])),
+        )
     for name, image in summary.get("registered", {}).items():
         result.registered.append(name)
         result.poses[name] = (np.array(image["R"]), np.array(image["t"]))
