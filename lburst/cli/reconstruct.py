@@ -12,6 +12,7 @@ from lburst.sfm.reconstruct import (
     AUTO_EXHAUSTIVE_MAX,
     LOOP_FRACTION,
     RECORDING_ABS_POSE_INLIERS,
+    RECORDING_NEAR,
     RECORDING_OVERLAP,
     RECORDING_RETRIEVAL,
     SCENE_OVERLAP,
@@ -46,8 +47,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--near",
         type=int,
-        help="pairs farther apart than this (retrieval candidates) are kept only when their inlier count "
-        "passes the loop test (default: the overlap for a recording, no test for a scene)",
+        help="pairs farther apart than this (retrieval candidates, the farthest sequential ones) are kept "
+        "only when their inlier count passes the loop test "
+        f"(default {RECORDING_NEAR} for a recording, no test for a scene)",
     )
     parser.add_argument(
         "--loop-fraction",

@@ -97,7 +97,7 @@ class ColmapOptions:
     refine_focal_length: bool = True
     refine_extra_params: bool = True
     near: int = 0
-    loop_inlier_fraction: float = 0.5
+    loop_inlier_fraction: float = 0.4
     abs_pose_min_num_inliers: int = 30
 
 

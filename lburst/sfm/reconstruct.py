@@ -41,12 +41,13 @@ AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto' for a scene: exhaustive up to this many
 SCENE_OVERLAP = 10  # sequential pairs of a scene: neighbours on each side
 # A recording (keyframes in time order), pairs='auto': sequential pairs with this overlap,
 # RECORDING_RETRIEVAL retrieval candidates per keyframe, the loop test (ColmapOptions.near)
-# for every pair farther apart than the overlap, and registration with at least
+# for every pair more than RECORDING_NEAR apart, and registration with at least
 # RECORDING_ABS_POSE_INLIERS 2D-3D inliers; docs/recordings.md has the measurements.
 RECORDING_OVERLAP = 3
+RECORDING_NEAR = 2
 RECORDING_RETRIEVAL = 5
-LOOP_FRACTION = 0.5
-RECORDING_ABS_POSE_INLIERS = 15
+LOOP_FRACTION = 0.4
+RECORDING_ABS_POSE_INLIERS = 10
 RESULT_FILE = "result.json"
 
 
@@ -73,12 +74,12 @@ class ReconstructOptions:
             farther apart (loop-closure candidates, :mod:`lburst.sfm.retrieval`); ``None``:
             5 for a recording, 0 for a scene.
         near: pairs more than this many images apart must also pass the loop test after
-            COLMAP's verification (:func:`lburst.sfm.colmap.loop_test`); ``None``: the
-            overlap for a recording, 0 (no test) for a scene.
+            COLMAP's verification (:func:`lburst.sfm.colmap.loop_test`); ``None``: 2 (at
+            most the overlap) for a recording, 0 (no test) for a scene.
         loop_fraction: the loop test's fraction of the adjacent pairs' median inlier count.
         abs_pose_inliers: fewest 2D-3D inliers to register an image (incremental mapper);
-            ``None``: 15 for a recording (its camera is one, usually calibrated, and the
-            last keyframes of a dark recording have few tracks), COLMAP's 30 for a scene.
+            ``None``: 10 for a recording (its camera is one, usually calibrated, and the
+            keyframes of a dark recording have few tracks), COLMAP's 30 for a scene.
         recording: :class:`lburst.sources.RecordingOptions` for a scene that is a
             recording (video or frame folder); ``None``: the defaults.
         matcher: matcher spec (:mod:`lburst.matching`): ``'mnn'`` (mutual nearest
@@ -357,9 +358,9 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
     noisy frames COLMAP verifies pairs of keyframes that share little of the view with as
     many inliers as the true ones (docs/recordings.md).  It gets sequential pairs
     (``RECORDING_OVERLAP``), ``RECORDING_RETRIEVAL`` retrieval candidates per keyframe,
-    the loop test for every pair farther apart than the overlap (the retrieval candidates,
-    or all far pairs of an explicit ``pairs='exhaustive'``) and registration from
-    ``RECORDING_ABS_POSE_INLIERS`` inliers.  A scene keeps exhaustive pairs up to
+    the loop test for every pair more than ``RECORDING_NEAR`` apart (the sequential pairs
+    3 apart, the retrieval candidates, all far pairs of an explicit ``pairs='exhaustive'``)
+    and registration from ``RECORDING_ABS_POSE_INLIERS`` inliers.  A scene keeps exhaustive pairs up to
     ``AUTO_EXHAUSTIVE_MAX`` images, sequential with overlap 10 beyond, no retrieval, no
     loop test and COLMAP's 30, unless the options say otherwise.
     """
@@ -369,7 +370,7 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
         mode = "sequential" if opts.pairs == "auto" else opts.pairs
         overlap = RECORDING_OVERLAP if opts.overlap is None else opts.overlap
         retrieval = RECORDING_RETRIEVAL if opts.retrieval is None else opts.retrieval
-        near = overlap if opts.near is None else opts.near
+        near = min(RECORDING_NEAR, overlap) if opts.near is None else opts.near
     else:
         mode = opts.pairs if opts.pairs != "auto" else ("exhaustive" if n <= AUTO_EXHAUSTIVE_MAX else "sequential")
         overlap = SCENE_OVERLAP if opts.overlap is None else opts.overlap
