@@ -14,11 +14,11 @@ from lburst.sfm.reconstruct import ReconstructOptions, pair_plan
 @pytest.mark.parametrize("n", [2, 3, 7, 15, 20, 21, 40])
 def test_a_recording_never_gets_exhaustive_pairs_by_default(n):
     plan = pair_plan(n, ReconstructOptions(), recording=True)
-    assert plan.mode == "sequential" and plan.overlap == 3 and plan.retrieval == 5
-    assert plan.near == 2  # the sequential pairs 3 apart and every retrieval candidate are loop-tested
+    assert plan.mode == "sequential" and plan.overlap == 2 and plan.retrieval == 5
+    assert plan.near == 2  # every retrieval candidate goes through the loop test
     assert plan.abs_pose_inliers == 10
-    if n == 15:  # the night flight: 39 sequential pairs instead of all 105
-        assert len(make_pairs(n, plan.mode, plan.overlap)) == 39
+    if n == 15:  # the night flight: 27 sequential pairs instead of all 105
+        assert len(make_pairs(n, plan.mode, plan.overlap)) == 27
 
 
 def test_a_scene_keeps_its_defaults_and_options_win():
@@ -34,6 +34,7 @@ def test_a_scene_keeps_its_defaults_and_options_win():
     chosen = pair_plan(15, ReconstructOptions(pairs="exhaustive"), recording=True)
     assert chosen.mode == "exhaustive" and chosen.near == 2  # asked for, but its far pairs are tested
     assert pair_plan(15, ReconstructOptions(overlap=1), recording=True).near == 1
+    assert pair_plan(15, ReconstructOptions(overlap=4), recording=True).near == 2
     custom = pair_plan(15, ReconstructOptions(overlap=2, retrieval=0, near=0, abs_pose_inliers=30), recording=True)
     assert (custom.overlap, custom.retrieval, custom.near, custom.abs_pose_inliers) == (2, 0, 0, 30)
     with pytest.raises(ValueError, match="overlap"):

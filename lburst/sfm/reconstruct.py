@@ -43,7 +43,7 @@ SCENE_OVERLAP = 10  # sequential pairs of a scene: neighbours on each side
 # RECORDING_RETRIEVAL retrieval candidates per keyframe, the loop test (ColmapOptions.near)
 # for every pair more than RECORDING_NEAR apart, and registration with at least
 # RECORDING_ABS_POSE_INLIERS 2D-3D inliers; docs/recordings.md has the measurements.
-RECORDING_OVERLAP = 3
+RECORDING_OVERLAP = 2
 RECORDING_NEAR = 2
 RECORDING_RETRIEVAL = 5
 LOOP_FRACTION = 0.4
@@ -63,7 +63,7 @@ class ReconstructOptions:
         pairs: ``'exhaustive'``, ``'sequential'`` (neighbours up to ``overlap`` apart) or
             ``'auto'`` (a scene: exhaustive up to 20 images, else sequential; a recording:
             always sequential, :func:`pair_plan`).
-        overlap: sequential pairs' reach; ``None``: 10 for a scene, 3 for a recording.
+        overlap: sequential pairs' reach; ``None``: 10 for a scene, 2 for a recording.
         fallback_exhaustive: rerun with every pair when sequential pairs leave images out.
         camera, camera_model, single_camera, fix_intrinsics: cameras (module docstring).
         mapper: ``'incremental'`` or ``'global'``.
@@ -358,9 +358,9 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
     noisy frames COLMAP verifies pairs of keyframes that share little of the view with as
     many inliers as the true ones (docs/recordings.md).  It gets sequential pairs
     (``RECORDING_OVERLAP``), ``RECORDING_RETRIEVAL`` retrieval candidates per keyframe,
-    the loop test for every pair more than ``RECORDING_NEAR`` apart (the sequential pairs
-    3 apart, the retrieval candidates, all far pairs of an explicit ``pairs='exhaustive'``)
-    and registration from ``RECORDING_ABS_POSE_INLIERS`` inliers.  A scene keeps exhaustive pairs up to
+    the loop test for every pair more than ``RECORDING_NEAR`` apart (the retrieval
+    candidates, the far pairs of a larger ``overlap`` or of an explicit
+    ``pairs='exhaustive'``) and registration from ``RECORDING_ABS_POSE_INLIERS`` inliers.  A scene keeps exhaustive pairs up to
     ``AUTO_EXHAUSTIVE_MAX`` images, sequential with overlap 10 beyond, no retrieval, no
     loop test and COLMAP's 30, unless the options say otherwise.
     """
