@@ -3,12 +3,13 @@ verifying again: which pairs and which loop test give which trajectory.
 
 Reads ``OUT/colmap/database.db`` (COLMAP's two-view geometries of every matched pair),
 ``OUT/colmap/verified.npz`` and ``OUT/reference.json`` of a run whose pairs include the
-wanted ones (e.g. ``--pairs exhaustive``).  Each configuration ``OVERLAP:NEAR:FRACTION:ABS``
+wanted ones (e.g. ``--pairs exhaustive``).  Each configuration ``OVERLAP:NEAR:FRACTION:ABS[:TWO]``
 copies the database, keeps the verified pairs at most ``OVERLAP`` keyframes apart of which
 those more than ``NEAR`` apart must pass the loop test
 (:func:`lburst.sfm.colmap.loop_test` with ``FRACTION``), deletes the other two-view
 geometries, runs the incremental mapper with ``ABS`` as the fewest 2D-3D inliers to
-register a keyframe, and prints the registered keyframes and the ATE::
+register a keyframe (``TWO`` 1: triangulating tracks of two keyframes too, 0: not, default:
+as the run did), and prints the registered keyframes and the ATE::
 
     lburst reconstruct flight_dng --burst 5 --every 32 --pairs exhaustive --near 14 --out dng_all
     python scripts/pair_subsets.py dng_all /tmp/subsets 2:2:0:30 3:2:0.4:10 14:2:0.4:10
@@ -28,7 +29,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run", type=Path, help="output folder of a finished lburst reconstruct run")
     parser.add_argument("work", type=Path, help="scratch folder for the databases and models")
-    parser.add_argument("configs", nargs="+", help="OVERLAP:NEAR:FRACTION:ABS")
+    parser.add_argument("configs", nargs="+", help="OVERLAP:NEAR:FRACTION:ABS[:TWO]")
     parser.add_argument("--threads", type=int, default=2, help="mapper threads (lburst reconstruct's default: 2)")
     args = parser.parse_args()
 
@@ -42,8 +43,9 @@ def main() -> None:
     pairs = verified["pairs"].reshape(-1, 2)
     counts = [len(verified[f"inl_{q}"]) for q in range(len(pairs))]
     for config in args.configs:
-        overlap, near, fraction, abs_inliers = config.split(":")
+        overlap, near, fraction, abs_inliers, *two = config.split(":")
         overlap, near, abs_inliers = int(overlap), int(near), int(abs_inliers)
+        two_view = bool(int(two[0])) if two else job.options.two_view_tracks
         within = (pairs[:, 1] - pairs[:, 0]) <= overlap
         keep, threshold = loop_test(pairs[within], np.array(counts)[within], near, float(fraction), 15)
         kept = {tuple(p) for p in pairs[within][keep].tolist()}
@@ -59,7 +61,13 @@ def main() -> None:
                     if (a, b) not in kept and db.exists_two_view_geometry(first, second):
                         db.delete_two_view_geometry(first, second)
         options = ColmapOptions(
-            **{**asdict(job.options), "num_threads": args.threads, "abs_pose_min_num_inliers": abs_inliers}
+            **{
+                **asdict(job.options),
+                "num_threads": args.threads,
+                "mapper_threads": args.threads,
+                "abs_pose_min_num_inliers": abs_inliers,
+                "two_view_tracks": two_view,
+            }
         )
         summary = summarize(map_database(work / "database.db", job.image_dir, work / "mapper", options))
         result = ReconstructionResult(str(args.run), "", str(work), names)

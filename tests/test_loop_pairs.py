@@ -16,7 +16,7 @@ def test_a_recording_never_gets_exhaustive_pairs_by_default(n):
     plan = pair_plan(n, ReconstructOptions(), recording=True)
     assert plan.mode == "sequential" and plan.overlap == 2 and plan.retrieval == 5
     assert plan.near == 2  # every retrieval candidate goes through the loop test
-    assert plan.abs_pose_inliers == 10
+    assert plan.abs_pose_inliers == 10 and plan.two_view_tracks and plan.mapper_threads == 1
     if n == 15:  # the night flight: 27 sequential pairs instead of all 105
         assert len(make_pairs(n, plan.mode, plan.overlap)) == 27
 
@@ -30,6 +30,7 @@ def test_a_scene_keeps_its_defaults_and_options_win():
         0,
         30,
     )
+    assert not scene.two_view_tracks and scene.mapper_threads is None  # COLMAP's triangulation, --threads
     assert pair_plan(25, ReconstructOptions(), recording=False).mode == "sequential"
     chosen = pair_plan(15, ReconstructOptions(pairs="exhaustive"), recording=True)
     assert chosen.mode == "exhaustive" and chosen.near == 2  # asked for, but its far pairs are tested
@@ -69,15 +70,15 @@ def _rot_y(deg):
     return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
 
 
-def false_loop_job(tmp_path, near):
+def false_loop_job(tmp_path, near, two_view_tracks=False):
     """Four views along a line over a random 3D scene, adjacent pairs matched with 150 true
     correspondences each, and a false loop pair (0, 3): 40 matches of extra keypoints that fit
     one epipolar geometry, of other points seen from another pose, as noisy descriptors
     of unrelated views can."""
     rng = np.random.default_rng(1)
     f, size = 300.0, (320, 240)
-    points = np.c_[rng.uniform(-6, 8, 4000), rng.uniform(-4, 4, 4000), rng.uniform(8, 14, 4000)]
-    poses = [(np.eye(3), -np.array([0.6 * i, 0, 0])) for i in range(4)]
+    points = np.c_[rng.uniform(-6, 14, 4000), rng.uniform(-4, 4, 4000), rng.uniform(8, 14, 4000)]
+    poses = [(np.eye(3), -np.array([2.0 * i, 0, 0])) for i in range(4)]
     uvs, masks = zip(*(_project(points, R, t, f, size) for R, t in poses))
     keypoints, index = [], []
     for i in range(4):
@@ -100,9 +101,11 @@ def false_loop_job(tmp_path, near):
     pairs.append((0, 3))
     matches.append(np.stack([k0 + np.arange(40), k3 + np.arange(40)], 1))
     camera = default_camera(*size, "PINHOLE", focal=f)
-    options = ColmapOptions(num_threads=1, max_num_trials=2000, near=near, refine_focal_length=False)
+    options = ColmapOptions(
+        num_threads=1, max_num_trials=2000, near=near, refine_focal_length=False, two_view_tracks=two_view_tracks
+    )
     job = ColmapJob([f"v{i}" for i in range(4)], str(tmp_path / "images"), [camera], [0] * 4, options)
-    job_dir = tmp_path / f"near{near}"
+    job_dir = tmp_path / f"near{near}_{int(two_view_tracks)}"
     job_dir.mkdir()
     job.save(job_dir / "job.json")
     np.savez(
@@ -134,3 +137,13 @@ def test_a_false_loop_pair_passes_colmap_but_not_the_loop_test(tmp_path):
         ids = {image.name: image.image_id for image in db.read_all_images()}
         assert not db.exists_two_view_geometry(ids["v0.png"], ids["v3.png"])
         assert db.exists_two_view_geometry(ids["v0.png"], ids["v1.png"])
+
+
+def test_two_view_tracks_are_triangulated_when_asked(tmp_path):
+    # the adjacent pairs' matches are the first 150 common points of each pair, so many
+    # points are matched in one pair only: COLMAP leaves those out unless asked
+    (tmp_path / "images").mkdir()
+    ignored = run_job(false_loop_job(tmp_path, near=1))
+    kept = run_job(false_loop_job(tmp_path, near=1, two_view_tracks=True))
+    assert len(ignored["registered"]) == len(kept["registered"]) == 4
+    assert kept["num_points3D"] > ignored["num_points3D"] + 50

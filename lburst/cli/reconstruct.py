@@ -83,6 +83,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument(
+        "--mapper-threads",
+        type=int,
+        help="threads of the mapper (default: 1 for a recording, which makes it repeatable; --threads for a scene)",
+    )
     parser.add_argument("--seed", type=int, default=0)
     add_matcher_argument(parser)
     parser.add_argument(
@@ -115,6 +120,7 @@ def main(args: argparse.Namespace) -> int:
             near=args.near,
             loop_fraction=args.loop_fraction,
             abs_pose_inliers=args.abs_pose_inliers,
+            mapper_threads=args.mapper_threads,
             recording=recording_options(args),
         )
     except (ReconstructionError, ValueError) as err:

@@ -85,6 +85,13 @@ class ColmapOptions:
             inlier count of the adjacent pairs (images 1 apart).
         abs_pose_min_num_inliers: fewest 2D-3D inliers to register an image in incremental
             mapping (COLMAP: 30).
+        two_view_tracks: incremental mapping triangulates tracks seen by two images only
+            (COLMAP ignores them).  With sequential pairs of dark keyframes most tracks
+            are two-view; without them too few points hold the scale and the trajectory
+            can shrink along the chain.
+        mapper_threads: threads of the mapper; ``None``: ``num_threads``.  Only one thread
+            makes incremental mapping repeatable: with two, the same verified pairs of the
+            moonless DNG flight mapped to ATE 0.18 % in one run and 10.6 % in two others.
     """
 
     mapper: str = "incremental"
@@ -99,6 +106,8 @@ class ColmapOptions:
     near: int = 0
     loop_inlier_fraction: float = 0.4
     abs_pose_min_num_inliers: int = 30
+    two_view_tracks: bool = False
+    mapper_threads: int | None = None
 
 
 @dataclass
@@ -288,20 +297,22 @@ def map_database(
 ) -> pycolmap.Reconstruction | None:
     """Run the mapper; return the model with the most registered images, or ``None`` if none."""
     pycolmap.set_random_seed(options.seed)
+    threads = options.num_threads if options.mapper_threads is None else options.mapper_threads
     work_dir = Path(work_dir)
     work_dir.mkdir(parents=True, exist_ok=True)
     if options.mapper == "incremental":
         opts = pycolmap.IncrementalPipelineOptions()
-        opts.num_threads = options.num_threads
+        opts.num_threads = threads
         opts.random_seed = options.seed
         opts.min_model_size = options.min_model_size
         opts.mapper.abs_pose_min_num_inliers = options.abs_pose_min_num_inliers
+        opts.triangulation.ignore_two_view_tracks = not options.two_view_tracks
         opts.ba_refine_focal_length = options.refine_focal_length
         opts.ba_refine_extra_params = options.refine_extra_params
         models = pycolmap.incremental_mapping(str(db_path), str(image_dir), str(work_dir), opts)
     elif options.mapper == "global":
         opts = pycolmap.GlobalPipelineOptions()
-        opts.num_threads = options.num_threads
+        opts.num_threads = threads
         opts.random_seed = options.seed
         opts.min_model_size = options.min_model_size
         opts.mapper.bundle_adjustment.refine_focal_length = options.refine_focal_length

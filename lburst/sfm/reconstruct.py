@@ -80,6 +80,9 @@ class ReconstructOptions:
         abs_pose_inliers: fewest 2D-3D inliers to register an image (incremental mapper);
             ``None``: 10 for a recording (its camera is one, usually calibrated, and the
             keyframes of a dark recording have few tracks), COLMAP's 30 for a scene.
+        mapper_threads: threads of the mapper; ``None``: 1 for a recording (the only
+            repeatable choice, :class:`lburst.sfm.colmap.ColmapOptions`), ``num_threads``
+            for a scene.
         recording: :class:`lburst.sources.RecordingOptions` for a scene that is a
             recording (video or frame folder); ``None``: the defaults.
         matcher: matcher spec (:mod:`lburst.matching`): ``'mnn'`` (mutual nearest
@@ -102,6 +105,7 @@ class ReconstructOptions:
     near: int | None = None
     loop_fraction: float = LOOP_FRACTION
     abs_pose_inliers: int | None = None
+    mapper_threads: int | None = None
     recording: Any = None
     matcher: str = "mnn"
 
@@ -348,6 +352,8 @@ class PairPlan:
     retrieval: int  # loop candidates per image (sequential only)
     near: int  # pairs farther apart than this must pass the loop test; 0: no test
     abs_pose_inliers: int  # incremental mapper: fewest 2D-3D inliers to register an image
+    two_view_tracks: bool = False  # incremental mapper: triangulate tracks of two images too
+    mapper_threads: int | None = None  # None: num_threads
 
 
 def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
@@ -360,9 +366,12 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
     (``RECORDING_OVERLAP``), ``RECORDING_RETRIEVAL`` retrieval candidates per keyframe,
     the loop test for every pair more than ``RECORDING_NEAR`` apart (the retrieval
     candidates, the far pairs of a larger ``overlap`` or of an explicit
-    ``pairs='exhaustive'``) and registration from ``RECORDING_ABS_POSE_INLIERS`` inliers.  A scene keeps exhaustive pairs up to
+    ``pairs='exhaustive'``), registration from ``RECORDING_ABS_POSE_INLIERS`` inliers, and
+    triangulation of the tracks seen by two keyframes only (COLMAP ignores them; with
+    sequential pairs most tracks of a dark recording are such, and without them the
+    scale can drift along the chain), mapped with one thread (repeatable).  A scene keeps exhaustive pairs up to
     ``AUTO_EXHAUSTIVE_MAX`` images, sequential with overlap 10 beyond, no retrieval, no
-    loop test and COLMAP's 30, unless the options say otherwise.
+    loop test, COLMAP's 30 and COLMAP's triangulation, unless the options say otherwise.
     """
     if opts.pairs not in ("auto", "exhaustive", "sequential"):
         raise ValueError(f"unknown pairing {opts.pairs!r}: expected 'auto', 'exhaustive' or 'sequential'")
@@ -380,7 +389,10 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
         raise ValueError(f"overlap must be at least 1, got {overlap}")
     default_abs = RECORDING_ABS_POSE_INLIERS if recording else 30
     abs_pose = default_abs if opts.abs_pose_inliers is None else opts.abs_pose_inliers
-    return PairPlan(mode, overlap, retrieval if mode == "sequential" else 0, max(near, 0), abs_pose)
+    mapper_threads = opts.mapper_threads if opts.mapper_threads is not None else (1 if recording else None)
+    return PairPlan(
+        mode, overlap, retrieval if mode == "sequential" else 0, max(near, 0), abs_pose, recording, mapper_threads
+    )
 
 
 def reconstruct_scene(
@@ -445,6 +457,8 @@ def reconstruct_scene(
             "near": plan.near,
             "loop_inlier_fraction": opts.loop_fraction,
             "abs_pose_min_num_inliers": plan.abs_pose_inliers,
+            "two_view_tracks": plan.two_view_tracks,
+            "mapper_threads": plan.mapper_threads,
             **opts.extra,
         },
     )
