@@ -11,7 +11,7 @@ import pytest
 import skimage.data
 import torch
 
-from lburst.cli.train import configure_parser, given_options
+from lburst.cli.train import config_from_args, configure_parser, given_options
 from lburst.model.network import CheckpointError, training_memory_format
 from lburst.train.loop import TrainConfig, check_resume_options, train
 from lburst.train.pairs import PairConfig
@@ -56,6 +56,17 @@ def test_options_a_resumed_run_would_ignore_are_refused(tmp_path):
         check_resume_options(tmp_path, given_options(args))
     same = parser.parse_args(["--out", str(tmp_path), "--resume", "--frames", "5", "--steps", "200"])
     check_resume_options(tmp_path, given_options(same))  # more steps, same frames: fine
+
+
+def test_resume_without_steps_runs_to_the_runs_own_end_not_a_presets(tmp_path):
+    (tmp_path / "config.json").write_text(json.dumps({"frames": 5, "steps": 1200, "epochs": None}))
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    assert config_from_args(parser.parse_args(["--out", str(tmp_path), "--resume"])).steps == 1200
+    assert config_from_args(parser.parse_args(["--out", str(tmp_path), "--resume", "--steps", "1500"])).steps == 1500
+    assert (
+        config_from_args(parser.parse_args(["--out", str(tmp_path / "new")])).steps == 20000
+    )  # a new run: the preset's
 
 
 def test_a_resumed_run_takes_the_precision_of_the_machine_it_continues_on(photos, tmp_path):

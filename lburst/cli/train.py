@@ -9,7 +9,7 @@ from dataclasses import fields, replace
 
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.paths import shared_dir
-from lburst.train.loop import PRESETS, TrainConfig, check_resume_options, train
+from lburst.train.loop import PRESETS, TrainConfig, check_resume_options, saved_run_length, train
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -96,6 +96,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         cfg = replace(cfg, pair=replace(cfg.pair, frames=cfg.frames))
     if args.steps is not None:
         cfg = replace(cfg, epochs=None)
+    elif args.resume:
+        cfg = replace(cfg, **saved_run_length(args.out))
     return cfg
 
 

@@ -487,6 +487,16 @@ RESUME_OVERRIDES = (
 )
 
 
+def saved_run_length(out: str | Path) -> dict:
+    """``steps`` and ``epochs`` of the run in ``out`` (its ``config.json``), so that ``--resume``
+    without ``--steps`` runs to the run's own end, not to a preset's; ``{}`` without a record."""
+    try:
+        saved = json.loads((Path(out) / "config.json").read_text())
+        return {"steps": int(saved["steps"]), "epochs": saved.get("epochs")}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+
+
 def check_resume_options(out: str | Path, given: dict) -> None:
     """``ValueError`` for an option given with ``--resume`` that the resumed run would ignore
     (its value differs from the one in the run's ``config.json``)."""
