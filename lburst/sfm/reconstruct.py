@@ -433,14 +433,15 @@ def reconstruct_scene(
     plan = pair_plan(n, opts, is_recording(scene_dir))
     mode = plan.mode
     pairs = make_pairs(n, mode, plan.overlap)
-    loops: list[tuple[int, int]] = []
+    loop_candidates: set[tuple[int, int]] = set()
     if plan.retrieval and mode == "sequential":
         from lburst.sfm.retrieval import retrieval_pairs, vlad
 
         loops = retrieval_pairs(
             vlad([f["descriptors"] for f in features], seed=opts.seed), plan.retrieval, plan.overlap
         )
-        pairs = sorted(set(pairs) | set(loops))
+        loop_candidates = set(loops) - set(pairs)
+        pairs = sorted(set(pairs) | loop_candidates)
     matches = match_pairs(features, pairs, opts.progress, opts.matcher)
     # a recording's meta.json camera is its calibration: one camera, held fixed
     calibrated = scene.camera is not None and opts.camera == "auto"
@@ -499,7 +500,7 @@ def reconstruct_scene(
         pairs=len(pairs),
         pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive",
         overlap=plan.overlap if mode == "sequential" else None,
-        loop_candidates=len(set(loops) - set(make_pairs(n, mode, plan.overlap))),
+        loop_candidates=len(loop_candidates),
         matcher=opts.matcher,
     )
     if plan.near and not result.error:
