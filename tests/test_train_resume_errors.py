@@ -101,3 +101,12 @@ def test_training_memory_format_auto_follows_the_device_and_cpu(monkeypatch):
     assert training_memory_format("cpu", "auto") is torch.channels_last
     with pytest.raises(ValueError, match="memory format must be"):
         training_memory_format("cpu", "nchw")
+
+
+def test_loss_weights_given_on_the_command_line_reach_the_config(tmp_path):
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    args = ["--out", str(tmp_path), "--preset", "aligned", "--ap-weight", "1", "--rel-base", "0.3"]
+    cfg = config_from_args(parser.parse_args(args))
+    assert (cfg.ap_weight, cfg.rel_base) == (1.0, 0.3)
+    assert config_from_args(parser.parse_args(["--out", str(tmp_path), "--preset", "aligned"])).ap_weight == 0.25

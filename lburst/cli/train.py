@@ -49,6 +49,11 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)",
     )
     p.add_argument(
+        "--ap-weight",
+        type=float,
+        help="weight of the unweighted descriptor AP term (1 - AP) beside R2D2's losses (lburst's presets: 0.25; paper: 0)",
+    )
+    p.add_argument(
         "--rel-base",
         type=float,
         help="R2D2's base AP (kappa) of the reliability loss: pixels whose AP passes it learn to be reliable (default 0.5)",
@@ -78,6 +83,7 @@ def given_options(args: argparse.Namespace) -> dict:
         "snapshot_every": args.snapshot_every,
         "tensorboard": args.tensorboard or None,
         "rel_logit_weight": args.rel_logit_weight,
+        "ap_weight": args.ap_weight,
         "rel_base": args.rel_base,
         "distill_weight": args.distill_weight,
         "init": args.init,
