@@ -22,7 +22,8 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "--video",
         type=Path,
         help="also (or only) write the flight as a continuous MP4 video, with "
-        "per-frame ground truth X.gt.txt (TUM) and X.meta.json (camera, fps)",
+        "per-frame ground truth X.gt.txt (TUM) and X.meta.json (camera, fps); with --noise "
+        "lowlight:... its frames are the camera's processing of the --dng version's raw frames",
     )
     p.add_argument(
         "--dng",

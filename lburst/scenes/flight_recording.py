@@ -9,9 +9,15 @@ so the bursts of the scene version are the frames around ``j = i * burst_spacing
 (:mod:`lburst.tum`) with the frame's timestamp, and the camera (PINHOLE, exact) and frame
 rate in the recording's ``meta.json`` (see :mod:`lburst.sources` for where they go).
 
-- **Video** (:func:`write_flight_video`): each frame as in the scene version (scaled by
-  ``exposure``, noise ``cfg.noise`` on the 0..255 scale, rounded to 8 bits), encoded
-  with H.264 (``crf``), ``yuv420p``, ``faststart``.
+- **Video** (:func:`write_flight_video`): encoded with H.264 (``crf``), ``yuv420p``,
+  ``faststart``.  With a sensor noise model (``lowlight:...``) a frame is what a drone's
+  camera makes of the very raw frame the DNG version stores (same Bayer sensor, same noise
+  draw): :func:`camera_isp` subtracts the black level, demosaics (bilinear), scales white
+  to 255 and rounds to 8 bits.  A Bayer sensor samples one colour per pixel, so it has a
+  third of the photo-electrons of per-channel noise at every pixel; the video and the DNG
+  of a flight thus hold the same light.  With any other noise (``gaussian:...``,
+  ``none``) a frame is the scene version's: scaled by ``exposure``, the noise added on
+  the 0..255 scale per pixel and channel, rounded to 8 bits.
 - **DNG** (:func:`write_flight_dng`): the rendered radiance (0..255 taken as linear,
   white at 255, times ``exposure``) is sampled through an RGGB Bayer filter and converted
   by the sensor of ``cfg.noise`` (``lowlight:...``, :class:`lburst.noise.LowLightNoise`:
@@ -20,7 +26,8 @@ rate in the recording's ``meta.json`` (see :mod:`lburst.sources` for where they 
   ``2**adc_bits - 1``.  These frames are very dark: at ``lowlight:moonless`` white is
   about 6 counts above black.
 
-Frame noise is seeded by ``(cfg.seed, 2, j)`` (video) and ``(cfg.seed, 3, j)`` (DNG).
+Frame noise is seeded by ``(cfg.seed, 3, j)`` (DNG, and a sensor-noise video) and
+``(cfg.seed, 2, j)`` (any other video).
 """
 
 from __future__ import annotations
@@ -98,12 +105,13 @@ def write_flight_video(path: str | Path, cfg: NightFlightConfig, crf: int = 16, 
     """Render the flight as an MP4 (module docstring), atomically; sidecars next to it."""
     import av
 
-    from lburst.noise import noise_from_spec
+    from lburst.noise import LowLightNoise, noise_from_spec
 
     path = Path(path)
     if cfg.width % 2 or cfg.height % 2:
         raise ValueError(f"an H.264 video needs an even size, got {cfg.width}x{cfg.height}")
     noise = noise_from_spec(cfg.noise)
+    bayer = isinstance(noise, LowLightNoise)
     rate = Fraction(fps(cfg)).limit_denominator(1000)
     with atomic_path(path) as tmp:
         with av.open(str(tmp), mode="w", format="mp4", options={"movflags": "+faststart"}) as container:
@@ -111,8 +119,12 @@ def write_flight_video(path: str | Path, cfg: NightFlightConfig, crf: int = 16, 
             stream.width, stream.height, stream.pix_fmt = cfg.width, cfg.height, "yuv420p"
             stream.options = {"crf": str(crf), "preset": "medium"}
             for j, _, image in _rendered(cfg, progress, f"video {path.name}"):
-                noisy = noise(image, np.random.default_rng([cfg.seed, 2, j]))
-                frame = av.VideoFrame.from_ndarray(np.clip(np.round(noisy), 0, 255).astype(np.uint8), format="rgb24")
+                if bayer:
+                    rgb = camera_isp(raw_frame(cfg, image, np.random.default_rng([cfg.seed, 3, j]))[0], noise)
+                else:
+                    noisy = noise(image, np.random.default_rng([cfg.seed, 2, j]))
+                    rgb = np.clip(np.round(noisy), 0, 255).astype(np.uint8)
+                frame = av.VideoFrame.from_ndarray(rgb, format="rgb24")
                 frame.pts = j
                 for packet in stream.encode(frame):
                     container.mux(packet)
@@ -133,6 +145,21 @@ def raw_frame(cfg: NightFlightConfig, radiance: np.ndarray, rng: np.random.Gener
     white = 2**sensor.adc_bits - 1
     counts = sensor.raw_counts(mosaic(radiance), rng) + BLACK_LEVEL
     return np.clip(counts, 0, white).astype(np.uint16), white
+
+
+def camera_isp(cfa: np.ndarray, sensor) -> np.ndarray:
+    """The 8-bit RGB ``(H, W, 3)`` a camera makes of raw counts ``cfa`` (``raw_frame``'s RGGB mosaic,
+    black level included) from ``sensor`` (a ``LowLightNoise``): bilinear demosaicing (of the
+    counts scaled up to 16 bits, so that interpolation does not round to whole counts), the black level
+    subtracted, white radiance (the sensor's counts at white) scaled to 255, rounded, clipped."""
+    import cv2
+
+    code = getattr(cv2, "COLOR_BayerRGGB2RGB", cv2.COLOR_BayerBG2RGB)  # OpenCV calls RGGB 'BG'
+    up = 2 ** max(0, 16 - sensor.adc_bits)
+    scaled = np.ascontiguousarray(cfa, np.uint16) * np.uint16(up)
+    rgb = cv2.cvtColor(scaled, code).astype(np.float32) / np.float32(up) - BLACK_LEVEL
+    counts_at_white = sensor.photons * sensor.quantum_efficiency / sensor.gain_e_per_adu
+    return np.clip(np.round(rgb * np.float32(255.0 / counts_at_white)), 0, 255).astype(np.uint8)
 
 
 def write_flight_dng(folder: str | Path, cfg: NightFlightConfig, progress: bool = True) -> Path:
