@@ -131,6 +131,11 @@ class LowLightNoise:
     def _electrons_per_unit(self) -> float:
         return self.photons * self.quantum_efficiency
 
+    @property
+    def counts_at_white(self) -> float:
+        """Mean converter counts (above the black level) of a white pixel."""
+        return self._electrons_per_unit() / self.gain_e_per_adu
+
     def expected_mean_var(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and variance of the output on the 0..255 scale (gamma 1, no clipping):
         mean = image; variance = (e + read^2 + gain^2 / 12) * (255 / (photons * QE))^2."""
@@ -154,7 +159,7 @@ class LowLightNoise:
 
     def __call__(self, image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         adu = self.raw_counts(image, rng)
-        out = adu * (self.gain_e_per_adu / self._electrons_per_unit())
+        out = adu / self.counts_at_white
         if self.gamma != 1.0:
             out = np.clip(out, 0, None) ** (1.0 / self.gamma)
         return (out * 255.0).astype(np.float32)

@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from lburst.io import atomic_path
+from lburst.noise import LowLightNoise
 from lburst.scenes.night_flight import NightFlightConfig, camera_pose, make_city, render_view
 from lburst.scenes.raycast import intrinsics
 from lburst.sources import ground_truth_path, meta_path
@@ -105,7 +106,7 @@ def write_flight_video(path: str | Path, cfg: NightFlightConfig, crf: int = 16, 
     """Render the flight as an MP4 (module docstring), atomically; sidecars next to it."""
     import av
 
-    from lburst.noise import LowLightNoise, noise_from_spec
+    from lburst.noise import noise_from_spec
 
     path = Path(path)
     if cfg.width % 2 or cfg.height % 2:
@@ -136,7 +137,7 @@ def write_flight_video(path: str | Path, cfg: NightFlightConfig, crf: int = 16, 
 
 def raw_frame(cfg: NightFlightConfig, radiance: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, int]:
     """Bayer raw counts ``(H, W)`` uint16 (black level included) of a radiance image, and the white level."""
-    from lburst.noise import LowLightNoise, noise_from_spec
+    from lburst.noise import noise_from_spec
     from lburst.scenes.dng import mosaic
 
     sensor = noise_from_spec(cfg.noise)
@@ -147,7 +148,7 @@ def raw_frame(cfg: NightFlightConfig, radiance: np.ndarray, rng: np.random.Gener
     return np.clip(counts, 0, white).astype(np.uint16), white
 
 
-def camera_isp(cfa: np.ndarray, sensor) -> np.ndarray:
+def camera_isp(cfa: np.ndarray, sensor: LowLightNoise) -> np.ndarray:
     """The 8-bit RGB ``(H, W, 3)`` a camera makes of raw counts ``cfa`` (``raw_frame``'s RGGB mosaic,
     black level included) from ``sensor`` (a ``LowLightNoise``): bilinear demosaicing (of the
     counts scaled up to 16 bits, so that interpolation does not round to whole counts), the black level
@@ -158,8 +159,7 @@ def camera_isp(cfa: np.ndarray, sensor) -> np.ndarray:
     up = 2 ** max(0, 16 - sensor.adc_bits)
     scaled = np.ascontiguousarray(cfa, np.uint16) * np.uint16(up)
     rgb = cv2.cvtColor(scaled, code).astype(np.float32) / np.float32(up) - BLACK_LEVEL
-    counts_at_white = sensor.photons * sensor.quantum_efficiency / sensor.gain_e_per_adu
-    return np.clip(np.round(rgb * np.float32(255.0 / counts_at_white)), 0, 255).astype(np.uint8)
+    return np.clip(np.round(rgb * np.float32(255.0 / sensor.counts_at_white)), 0, 255).astype(np.uint8)
 
 
 def write_flight_dng(folder: str | Path, cfg: NightFlightConfig, progress: bool = True) -> Path:
