@@ -43,6 +43,26 @@ def test_onnx_model_extracts_through_lburst(exported):
         np.testing.assert_allclose(dense_onnx[key], dense_torch[key], atol=1e-5)
 
 
+def test_onnx_model_keeps_the_aligned_input_and_the_descriptor_whitening(exported, tmp_path):
+    net, _ = exported
+    rng = np.random.default_rng(1)
+    mean = rng.normal(size=128).astype(np.float32) * 0.05
+    matrix = np.eye(128, dtype=np.float32) + rng.normal(size=(128, 128)).astype(np.float32) * 0.01
+    meta = {
+        "input": "aligned",
+        "descriptor_mean": torch.from_numpy(mean),
+        "descriptor_whitening": torch.from_numpy(matrix),
+    }
+    save_checkpoint(net, tmp_path / "w.pt", meta=meta)
+    model = LBurst.from_onnx(export_onnx(tmp_path / "w.pt", tmp_path / "w.onnx"))
+    reference = LBurst.from_checkpoint(tmp_path / "w.pt", device="cpu")
+    assert model.align and reference.align
+    np.testing.assert_array_equal(model.descriptor_whitening.numpy(), matrix)
+    burst = rng.integers(0, 256, (3, 70, 90, 3), dtype=np.uint8)
+    np.testing.assert_allclose(model.dense(burst)["descriptors"], reference.dense(burst)["descriptors"], atol=1e-4)
+    assert not LBurst.from_onnx(exported[1]).align  # weights for unaligned bursts stay so
+
+
 def test_bad_onnx_file_is_a_clear_error(tmp_path):
     bad = tmp_path / "bad.onnx"
     bad.write_bytes(b"nope")

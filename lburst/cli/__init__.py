@@ -27,6 +27,7 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("reconstruct",), "lburst.cli.reconstruct", "a 3D model of a burst scene with COLMAP"),
     (("demo",), "lburst.cli.demo", "synthetic night flight: LBurst vs SIFT, with a report"),
     (("export", "onnx"), "lburst.cli.export_onnx", "export a network to ONNX"),
+    (("export", "whitened"), "lburst.cli.export_whitened", "weights with descriptor whitening from training photos"),
 ]
 
 

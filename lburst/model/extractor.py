@@ -159,13 +159,18 @@ class LBurst:
         runner: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor]] | None = None,
         frames: int | None = None,
         align: bool = False,
+        descriptor_mean: np.ndarray | None = None,
+        descriptor_whitening: np.ndarray | None = None,
     ) -> None:
         """``net``: the network; or ``runner`` (with ``frames``): any callable with the
         signature of :meth:`lburst.model.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session.
         ``align``: the weights are run on aligned bursts (their checkpoint says
         ``meta['input'] == 'aligned'``): :meth:`extract` and :meth:`dense` warp a uint8 or
         uint16 burst's frames onto the common frame first (:func:`lburst.align.align_burst`:
-        ECC shifts with a constant velocity), as ``align+lburst`` does."""
+        ECC shifts with a constant velocity), as ``align+lburst`` does.
+        ``descriptor_mean`` (D,) and ``descriptor_whitening`` (D, D): the weights' descriptor
+        whitening (checkpoint ``meta``, :mod:`lburst.train.whitening`); descriptors are
+        returned as ``normalize(W (d - mean))`` (``W`` the identity when not given)."""
         if net is None and runner is None:
             raise ValueError("give a network or a runner")
         self.device = check_device(device)
@@ -176,6 +181,31 @@ class LBurst:
         self._perm = frame_permutation(self.frames, frame_order)
         self._runner = runner
         self._reduced: dict[str, FastLBurstNet] = {}
+        self.descriptor_mean = self.descriptor_whitening = None
+        if descriptor_whitening is not None and descriptor_mean is None:
+            raise ValueError("descriptor_whitening needs descriptor_mean")
+        if descriptor_mean is not None:
+            mean = torch.as_tensor(np.asarray(descriptor_mean, np.float32))
+            if mean.ndim != 1 or not torch.isfinite(mean).all():
+                raise ValueError(f"descriptor_mean must be a finite (D,) vector, got shape {tuple(mean.shape)}")
+            self.descriptor_mean = mean.to(self.device)
+        if descriptor_whitening is not None:
+            matrix = torch.as_tensor(np.asarray(descriptor_whitening, np.float32))
+            if matrix.shape != (len(self.descriptor_mean),) * 2 or not torch.isfinite(matrix).all():
+                raise ValueError(
+                    f"descriptor_whitening must be a finite ({len(self.descriptor_mean)}, "
+                    f"{len(self.descriptor_mean)}) matrix, got shape {tuple(matrix.shape)}"
+                )
+            self.descriptor_whitening = matrix.to(self.device)
+
+    def _whiten(self, desc: torch.Tensor, dim: int) -> torch.Tensor:
+        """``normalize(W (desc - mean))`` along ``dim`` (unchanged without whitening)."""
+        if self.descriptor_mean is None:
+            return desc
+        d = desc.float().movedim(dim, -1) - self.descriptor_mean
+        if self.descriptor_whitening is not None:
+            d = d @ self.descriptor_whitening.T
+        return F.normalize(d, dim=-1).movedim(-1, dim)
 
     @property
     def fast_net(self) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
@@ -198,7 +228,16 @@ class LBurst:
         from lburst.model.onnx import OnnxRunner
 
         runner = OnnxRunner(path, threads=threads)
-        return cls(None, "cpu", frame_order, runner=runner, frames=runner.frames)
+        return cls(
+            None,
+            "cpu",
+            frame_order,
+            runner=runner,
+            frames=runner.frames,
+            align=runner.meta["input"] == "aligned",
+            descriptor_mean=runner.meta.get("descriptor_mean"),
+            descriptor_whitening=runner.meta.get("descriptor_whitening"),
+        )
 
     @classmethod
     def from_checkpoint(
@@ -212,10 +251,17 @@ class LBurst:
         ``align`` defaults to what the checkpoint's ``meta['input']`` says."""
         device = check_device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         net, extra = load_checkpoint(path, device)
+        meta = extra.get("meta") if isinstance(extra.get("meta"), dict) else {}
         if align is None:
-            meta = extra.get("meta")
-            align = isinstance(meta, dict) and meta.get("input") == "aligned"
-        return cls(net, device, frame_order, align=align)
+            align = meta.get("input") == "aligned"
+        return cls(
+            net,
+            device,
+            frame_order,
+            align=align,
+            descriptor_mean=meta.get("descriptor_mean"),
+            descriptor_whitening=meta.get("descriptor_whitening"),
+        )
 
     @classmethod
     def pretrained(cls, name: str = "lburst-b5", device: str | torch.device | None = None) -> "LBurst":
@@ -250,6 +296,7 @@ class LBurst:
         x = self._input(burst)
         rep, rel, half = self.fast_net(x)
         desc = F.normalize(F.interpolate(half, scale_factor=2.0, mode="bilinear", align_corners=False), dim=1)
+        desc = self._whiten(desc, dim=1)
         h, w = x.shape[-2:]
         desc = F.pad(desc, (0, w - desc.shape[-1], 0, h - desc.shape[-2]), mode="replicate")
         return {
@@ -321,5 +368,5 @@ class LBurst:
             "keypoints": torch.stack([torch.cat(xs), torch.cat(ys)], -1)[order].float().cpu().numpy(),
             "scales": torch.cat(scales)[order].float().cpu().numpy(),
             "scores": score[order].float().cpu().numpy(),
-            "descriptors": torch.cat(descs)[order].float().cpu().numpy(),
+            "descriptors": self._whiten(torch.cat(descs)[order], dim=1).float().cpu().numpy(),
         }

@@ -9,9 +9,11 @@ sizes exactly as the torch path does, so :class:`lburst.LBurst` runs either.
 
 from __future__ import annotations
 
+import json
 import warnings
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from lburst.extras import require
@@ -24,7 +26,7 @@ def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Pat
     """Export the checkpoint's fast network to ``out`` (atomically)."""
     for module in ("onnx", "onnxscript"):
         require(module, "lburst export onnx")
-    net, _ = load_checkpoint(checkpoint, "cpu")
+    net, extra = load_checkpoint(checkpoint, "cpu")
     core = CoreModule(FastLBurstNet(net, tiled=False).eval()).eval()  # one graph for any size
     example = torch.randn(1, net.config.in_channels, 96, 128)
     height, width = torch.export.Dim("height", min=32, max=8192), torch.export.Dim("width", min=32, max=8192)
@@ -43,7 +45,24 @@ def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Pat
             external_data=False,
             verbose=False,
         )
+        _store_meta(tmp, extra.get("meta") if isinstance(extra.get("meta"), dict) else {})
     return out
+
+
+def _store_meta(path: Path, meta: dict) -> None:
+    """Keep what extraction needs beside the graph (``metadata_props``): the weights' input
+    (``aligned`` bursts or not) and their descriptor whitening."""
+    import onnx
+
+    model = onnx.load(str(path))
+    entries = {"lburst.input": str(meta.get("input", "burst"))}
+    for key in ("descriptor_mean", "descriptor_whitening"):
+        if meta.get(key) is not None:
+            entries[f"lburst.{key}"] = json.dumps(np.asarray(meta[key], np.float32).tolist())
+    for key, value in entries.items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = key, value
+    onnx.save(model, str(path))
 
 
 class OnnxRunner:
@@ -66,6 +85,18 @@ class OnnxRunner:
         if not isinstance(channels, int) or channels % 3:
             raise CheckpointError(f"{path}: input has {channels} channels, not 3N")
         self.frames = channels // 3
+        props = self.session.get_modelmeta().custom_metadata_map
+        try:
+            self.meta = {
+                "input": props.get("lburst.input", "burst"),
+                **{
+                    k: np.asarray(json.loads(props[f"lburst.{k}"]), np.float32)
+                    for k in ("descriptor_mean", "descriptor_whitening")
+                    if f"lburst.{k}" in props
+                },
+            }
+        except ValueError as exc:
+            raise CheckpointError(f"{path}: unreadable lburst metadata ({exc})") from exc
 
     def __call__(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         arrays = self.session.run(None, {"burst": x.contiguous().cpu().numpy()})

@@ -1,0 +1,39 @@
+"""``lburst export whitened``: weights with descriptor whitening measured on training photos
+(:mod:`lburst.train.whitening`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from lburst.model.network import CheckpointError
+from lburst.paths import shared_dir
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    p.add_argument("checkpoint", help="weights to whiten (lburst layout; existing whitening is measured again)")
+    p.add_argument("--out", type=Path, required=True, help="checkpoint to write")
+    p.add_argument(
+        "--photos",
+        nargs="+",
+        type=Path,
+        help="photo folders (default: $LBURST_SHARED/data/train512); the validation tenth is left out",
+    )
+    p.add_argument("--count", type=int, default=80, help="photos to sample, one synthetic burst each")
+    p.add_argument("--power", type=float, default=1.0, help="1: full whitening, 0: centring only")
+    p.add_argument("--seed", type=int, default=0, help="seed of the photo sample, shifts and noise")
+    p.set_defaults(_default_photos=shared_dir() / "data" / "train512")
+
+
+def main(args: argparse.Namespace) -> int:
+    from lburst.train.whitening import sample_photos, whiten_checkpoint
+
+    try:
+        photos = sample_photos(args.photos or [args._default_photos], args.count, args.seed)
+        whiten_checkpoint(args.checkpoint, args.out, photos, seed=args.seed, power=args.power)
+    except (CheckpointError, FileNotFoundError, ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.out} (descriptor statistics of {len(photos)} training photos)")
+    return 0
