@@ -35,8 +35,10 @@ def test_whitened_descriptors_are_w_times_the_centred_raw_ones_renormalised(net,
     mean = d.mean(0)
     matrix = whitening_matrix(np.cov(d.T))
     model = LBurst(net, descriptor_mean=mean, descriptor_whitening=matrix)
-    out = model.extract(burst, top_k=300, **ANY)
+    out = model.extract(burst, top_k=300, whiten=True, **ANY)
     np.testing.assert_array_equal(out["keypoints"], raw["keypoints"])
+    # asked for only: by default the same weights give the raw descriptors
+    np.testing.assert_array_equal(model.extract(burst, top_k=300, **ANY)["descriptors"], raw["descriptors"])
     expected = (d - mean) @ matrix.T
     expected /= np.linalg.norm(expected, axis=1, keepdims=True)
     np.testing.assert_allclose(out["descriptors"], expected, atol=1e-4)
@@ -46,7 +48,7 @@ def test_whitened_descriptors_are_w_times_the_centred_raw_ones_renormalised(net,
     raw_spectrum = np.linalg.eigvalsh(np.cov(d.T))
     assert spectrum[-1] / spectrum.sum() < 0.5 * raw_spectrum[-1] / raw_spectrum.sum()
     dense_raw = LBurst(net).dense(burst)["descriptors"]
-    dense = model.dense(burst)["descriptors"]
+    dense = model.dense(burst, whiten=True)["descriptors"]
     e = (dense_raw - mean) @ matrix.T
     np.testing.assert_allclose(dense, e / np.linalg.norm(e, axis=-1, keepdims=True), atol=1e-4)
 
@@ -54,7 +56,7 @@ def test_whitened_descriptors_are_w_times_the_centred_raw_ones_renormalised(net,
 def test_centring_alone_subtracts_the_mean(net, burst):
     raw = LBurst(net).extract(burst, top_k=300, **ANY)["descriptors"]
     mean = raw.mean(0)
-    out = LBurst(net, descriptor_mean=mean).extract(burst, top_k=300, **ANY)["descriptors"]
+    out = LBurst(net, descriptor_mean=mean).extract(burst, top_k=300, whiten=True, **ANY)["descriptors"]
     np.testing.assert_allclose(out, (raw - mean) / np.linalg.norm(raw - mean, axis=1, keepdims=True), atol=1e-5)
 
 
@@ -78,6 +80,10 @@ def test_bad_statistics_are_errors(net):
         LBurst(net, descriptor_mean=np.zeros(128), descriptor_whitening=np.eye(64))
     with pytest.raises(ValueError, match="needs descriptor_mean"):
         LBurst(net, descriptor_whitening=np.eye(128))
+    with pytest.raises(ValueError, match="no descriptor whitening.*lburst export whitened"):
+        LBurst(net).extract(np.zeros((3, 64, 64, 3), np.uint8), whiten=True, **ANY)
+    with pytest.raises(ValueError, match="whiten must be True or False"):
+        LBurst(net).extract(np.zeros((3, 64, 64, 3), np.uint8), whiten="yes")
 
 
 def test_whiten_checkpoint_stores_the_statistics_and_from_checkpoint_applies_them(net, tmp_path):
@@ -95,15 +101,18 @@ def test_whiten_checkpoint_stores_the_statistics_and_from_checkpoint_applies_the
     assert meta["step"] == 3 and meta["input"] == "aligned" and meta["descriptor_statistics"]["photos"] == 3
     np.testing.assert_array_equal(meta["descriptor_mean"].numpy(), mean)
     np.testing.assert_array_equal(meta["descriptor_whitening"].numpy(), matrix)
-    # seeded, and measured on the raw descriptors even when the input checkpoint is whitened
+    # seeded, and measured again on the raw descriptors when the input checkpoint has whitening
     again, _ = whiten_checkpoint(
         tmp_path / "w.pt", tmp_path / "w2.pt", photos, seed=5, progress=False, extract_options=ANY
     )
     np.testing.assert_array_equal(again, mean)
     model = LBurst.from_checkpoint(tmp_path / "w.pt", device="cpu")
     np.testing.assert_array_equal(model.descriptor_whitening.numpy(), matrix)
-    with pytest.raises(ValueError, match="already whitened"):
-        descriptor_statistics(model, photos, np.random.default_rng(0), extract_options=ANY)
+    # statistics are of the raw descriptors, whatever the options say
+    again_mean, _ = descriptor_statistics(
+        model, photos, np.random.default_rng(5), progress=False, extract_options={**ANY, "whiten": True}
+    )
+    np.testing.assert_array_equal(again_mean, mean)
 
 
 def test_export_whitened_cli_writes_weights_and_names_a_missing_checkpoint(net, tmp_path, capsys):

@@ -5,7 +5,15 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from lburst.train.losses import APSampling, cosim_loss, peaky_loss, quantized_ap, reliability_ap_loss, warp_to_a
+from lburst.train.losses import (
+    APSampling,
+    cosim_loss,
+    peaky_loss,
+    quantized_ap,
+    reliability_ap_loss,
+    spread_loss,
+    warp_to_a,
+)
 
 
 def _shift_flow(h, w, dx, dy, b=1):
@@ -175,3 +183,25 @@ def test_a_lower_base_keeps_pixels_reliable_whose_descriptors_still_match_under_
         grads[base] = rel.grad.sum().item()
     assert 0.3 < ap.item() < 0.5
     assert grads[0.5] > 0 > grads[0.3]  # base 0.5: reliability goes down; base 0.3: up
+
+
+def test_spread_loss_is_the_common_component_and_its_gradient_removes_it():
+    gen = torch.Generator().manual_seed(0)
+    spread = F.normalize(torch.randn(2, 128, 8, 8, generator=gen), dim=1)
+    assert spread_loss(spread) < 0.01  # random unit vectors: no common component
+    common = F.normalize(torch.randn(128, generator=gen), dim=0).view(1, 128, 1, 1)
+    raw = (spread + 2 * common).requires_grad_(True)
+    shared = F.normalize(raw, dim=1)
+    mean = shared.mean(dim=(0, 2, 3))
+    torch.testing.assert_close(spread_loss(shared), mean.square().sum())
+    assert spread_loss(shared) > 0.5
+    spread_loss(shared).backward()
+    with torch.no_grad():  # one gradient step on the raw descriptors lowers it
+        stepped = F.normalize(raw - 5 * raw.grad, dim=1)
+    assert spread_loss(stepped) < spread_loss(shared.detach())
+    # weighted: only the weighted pixels count
+    mixed = torch.cat([spread, F.normalize(spread + 2 * common, dim=1)], dim=0)
+    weight = torch.zeros(4, 1, 8, 8)
+    weight[2:] = 1
+    torch.testing.assert_close(spread_loss(mixed, weight), spread_loss(mixed[2:]))
+    assert spread_loss(mixed, 1 - weight) < 0.01

@@ -106,7 +106,18 @@ def test_training_memory_format_auto_follows_the_device_and_cpu(monkeypatch):
 def test_loss_weights_given_on_the_command_line_reach_the_config(tmp_path):
     parser = argparse.ArgumentParser()
     configure_parser(parser)
-    args = ["--out", str(tmp_path), "--preset", "aligned", "--ap-weight", "1", "--rel-base", "0.3"]
+    args = [
+        "--out",
+        str(tmp_path),
+        "--preset",
+        "aligned",
+        "--ap-weight",
+        "1",
+        "--rel-base",
+        "0.3",
+        "--spread-weight",
+        "2",
+    ]
     cfg = config_from_args(parser.parse_args(args))
-    assert (cfg.ap_weight, cfg.rel_base) == (1.0, 0.3)
+    assert (cfg.ap_weight, cfg.rel_base, cfg.spread_weight) == (1.0, 0.3, 2.0)
     assert config_from_args(parser.parse_args(["--out", str(tmp_path), "--preset", "aligned"])).ap_weight == 0.25

@@ -63,6 +63,11 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         type=float,
         help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)",
     )
+    p.add_argument(
+        "--spread-weight",
+        type=float,
+        help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)",
+    )
     p.add_argument("--init", help="start from this checkpoint of our own (e.g. lburst/weights/lburst-b5.pt)")
     p.add_argument("--seed", type=int)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -86,6 +91,7 @@ def given_options(args: argparse.Namespace) -> dict:
         "ap_weight": args.ap_weight,
         "rel_base": args.rel_base,
         "distill_weight": args.distill_weight,
+        "spread_weight": args.spread_weight,
         "init": args.init,
         "checkpoint_every_s": args.checkpoint_every,
     }

@@ -54,6 +54,7 @@ class LearnedOptions:
     published_coordinates: bool = MultiScaleConfig.published_coordinates
     fast: bool = MultiScaleConfig.fast
     precision: str = MultiScaleConfig.precision
+    whiten: bool = MultiScaleConfig.whiten
 
     def __post_init__(self) -> None:
         autocast_dtype(self.precision)  # a clear error for an unknown precision
@@ -71,6 +72,7 @@ class LearnedOptions:
                 "published_coordinates",
                 "fast",
                 "precision",
+                "whiten",
             )
         }
 

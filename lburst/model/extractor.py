@@ -43,6 +43,8 @@ class MultiScaleConfig:
             ``False`` runs the plain network as the published code does.
         precision: ``'fp32'``, or ``'bf16'``/``'fp16'`` for the fast path's backbone
             (autocast; heads stay fp32): faster where the hardware has it, not identical.
+        whiten: return whitened descriptors (the weights' ``descriptor_whitening``,
+            :mod:`lburst.train.whitening`): more mutual matches, a lower share of them correct.
     """
 
     min_size: int = 256
@@ -56,6 +58,7 @@ class MultiScaleConfig:
     published_coordinates: bool = False
     fast: bool = True
     precision: str = "fp32"
+    whiten: bool = False
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field for any value outside its range (every use of
@@ -89,7 +92,7 @@ class MultiScaleConfig:
                 raise ValueError(f"{name} must be in [0, 1], got {value!r}")
         if self.top_k is not None and (not _is_int(self.top_k) or self.top_k < 0):
             raise ValueError(f"top_k must be an integer >= 0 or None, got {self.top_k!r}")
-        for name in ("published_coordinates", "fast"):
+        for name in ("published_coordinates", "fast", "whiten"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         autocast_dtype(self.precision)
@@ -169,8 +172,9 @@ class LBurst:
         uint16 burst's frames onto the common frame first (:func:`lburst.align.align_burst`:
         ECC shifts with a constant velocity), as ``align+lburst`` does.
         ``descriptor_mean`` (D,) and ``descriptor_whitening`` (D, D): the weights' descriptor
-        whitening (checkpoint ``meta``, :mod:`lburst.train.whitening`); descriptors are
-        returned as ``normalize(W (d - mean))`` (``W`` the identity when not given)."""
+        whitening (checkpoint ``meta``, :mod:`lburst.train.whitening`); with ``whiten=True``
+        descriptors are returned as ``normalize(W (d - mean))`` (``W`` the identity when not
+        given)."""
         if net is None and runner is None:
             raise ValueError("give a network or a runner")
         self.device = check_device(device)
@@ -199,9 +203,9 @@ class LBurst:
             self.descriptor_whitening = matrix.to(self.device)
 
     def _whiten(self, desc: torch.Tensor, dim: int) -> torch.Tensor:
-        """``normalize(W (desc - mean))`` along ``dim`` (unchanged without whitening)."""
+        """``normalize(W (desc - mean))`` along ``dim`` (``W`` the identity without a matrix)."""
         if self.descriptor_mean is None:
-            return desc
+            raise ValueError("these weights carry no descriptor whitening; add it with `lburst export whitened`")
         d = desc.float().movedim(dim, -1) - self.descriptor_mean
         if self.descriptor_whitening is not None:
             d = d @ self.descriptor_whitening.T
@@ -287,8 +291,8 @@ class LBurst:
         return normalize_burst(burst[self._perm], self.device)
 
     @torch.inference_mode()
-    def dense(self, burst: np.ndarray) -> Features:
-        """Dense outputs at the input's resolution.
+    def dense(self, burst: np.ndarray, whiten: bool = False) -> Features:
+        """Dense outputs at the input's resolution (``whiten``: as :class:`MultiScaleConfig`).
 
         Returns ``descriptors`` (H, W, D), ``repeatability`` (H, W) and
         ``reliability`` (H, W), float32 NumPy arrays.
@@ -296,7 +300,8 @@ class LBurst:
         x = self._input(burst)
         rep, rel, half = self.fast_net(x)
         desc = F.normalize(F.interpolate(half, scale_factor=2.0, mode="bilinear", align_corners=False), dim=1)
-        desc = self._whiten(desc, dim=1)
+        if whiten:
+            desc = self._whiten(desc, dim=1)
         h, w = x.shape[-2:]
         desc = F.pad(desc, (0, w - desc.shape[-1], 0, h - desc.shape[-2]), mode="replicate")
         return {
@@ -317,6 +322,9 @@ class LBurst:
         """
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
         return self._extract(self._input(burst), cfg)
+
+    def _descriptors(self, desc: torch.Tensor, whiten: bool) -> np.ndarray:
+        return (self._whiten(desc, dim=1) if whiten else desc).float().cpu().numpy()
 
     def _extract(self, x: torch.Tensor, cfg: MultiScaleConfig) -> Features:
         height, width = x.shape[-2:]
@@ -368,5 +376,5 @@ class LBurst:
             "keypoints": torch.stack([torch.cat(xs), torch.cat(ys)], -1)[order].float().cpu().numpy(),
             "scales": torch.cat(scales)[order].float().cpu().numpy(),
             "scores": score[order].float().cpu().numpy(),
-            "descriptors": self._whiten(torch.cat(descs)[order], dim=1).float().cpu().numpy(),
+            "descriptors": self._descriptors(torch.cat(descs)[order], cfg.whiten),
         }

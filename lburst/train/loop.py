@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import torch
+import torch.nn.functional as F
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
@@ -48,10 +49,11 @@ from lburst.train.losses import (
     logit_margin_loss,
     peaky_loss,
     reliability_ap_loss,
+    spread_loss,
 )
 from lburst.train.pairs import PairConfig
 
-LOG_FIELDS = ("step", "seconds", "loss", "cosim", "peaky", "reliability", "ap", "distill")
+LOG_FIELDS = ("step", "seconds", "loss", "cosim", "peaky", "reliability", "ap", "distill", "spread")
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,11 @@ class TrainConfig:
     the noisy burst A at every pixel (descriptors and both maps), so every step teaches
     noise invariance directly (:func:`lburst.train.losses.distillation_loss`).
 
+    ``spread_weight`` adds ``spread_weight * spread_loss``: the squared norm of the batch's
+    mean descriptor over the pixels the detector would keep (3x3 maxima of the
+    repeatability with both maps above 0.7), so that keypoint descriptors keep no common component
+    (:func:`lburst.train.losses.spread_loss`).
+
     ``init`` starts the weights from a checkpoint of this project's own (for example the
     shipped ``lburst-b5``) instead of at random; the optimizer starts fresh.  A
     single-image checkpoint starts a burst run through :func:`lburst.model.replicate_frames`
@@ -108,6 +115,7 @@ class TrainConfig:
     rel_logit_margin: float = 4.0
     rel_base: float = 0.5
     distill_weight: float = 0.0
+    spread_weight: float = 0.0
     init: str | None = None
     seed: int = 0
     workers: int = 1
@@ -185,6 +193,7 @@ def training_step(
     distill_weight: float = 0.0,
     teacher: torch.nn.Module | None = None,
     memory_format: torch.memory_format = torch.channels_last,
+    spread_weight: float = 0.0,
 ) -> dict[str, torch.Tensor]:
     """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``).
 
@@ -205,6 +214,11 @@ def training_step(
     if rel_logit_weight > 0:
         loss = loss + rel_logit_weight * logit_margin_loss(out["reliability_logits"].float(), rel_logit_margin)
     losses = {"cosim": cosim, "peaky": peaky, "reliability": reliability, "ap": ap}
+    if spread_weight > 0:
+        with torch.no_grad():  # the keypoints of the test-time detector (3x3 maxima, both thresholds 0.7)
+            peaks = (rep == F.max_pool2d(rep, 3, 1, 1)) & (rep > 0.7) & (rel > 0.7)
+        losses["spread"] = spread_loss(desc, peaks.float())
+        loss = loss + spread_weight * losses["spread"]
     if distill_weight > 0:
         if teacher is None or "clean_a" not in batch:
             raise ValueError("distill_weight > 0 needs a teacher and the batch's clean_a")
@@ -387,6 +401,7 @@ def train(
                 distill_weight=cfg.distill_weight,
                 teacher=net,
                 memory_format=layout,
+                spread_weight=cfg.spread_weight,
             )
             optimizer.zero_grad(set_to_none=True)
             losses["loss"].backward()

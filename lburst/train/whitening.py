@@ -14,7 +14,9 @@ the keypoint descriptors of one synthetic burst per photo: a random shift of up 
 ``max_shift`` px per frame and Gaussian noise of a standard deviation drawn from
 ``noise_std`` (0..255), so that they cover clean and noisy input alike. They are kept in
 the checkpoint's ``meta`` (``descriptor_mean``, ``descriptor_whitening``) and applied by
-:class:`lburst.model.extractor.LBurst`.
+:class:`lburst.model.extractor.LBurst` when asked (``whiten=True``; the method option
+``lburst,whiten=true``). It is not the default: it raises the mutual matches and the
+correct ones, but lowers the share of correct ones (docs/training.md).
 """
 
 from __future__ import annotations
@@ -57,10 +59,8 @@ def descriptor_statistics(
     progress: bool = True,
     extract_options: Mapping[str, Any] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean (D,) and covariance (D, D) of ``model``'s raw keypoint descriptors over one
+    """Mean (D,) and covariance (D, D) of ``model``'s raw (never whitened) keypoint descriptors over one
     synthetic burst per photo (``extract_options``: :class:`lburst.model.extractor.MultiScaleConfig` fields)."""
-    if model.descriptor_mean is not None:
-        raise ValueError("measure the statistics on a model without whitening (its descriptors are already whitened)")
     if not photos:
         raise ValueError("no photos to measure descriptor statistics on")
     total = outer = None
@@ -69,7 +69,9 @@ def descriptor_statistics(
         shift = rng.uniform(-max_shift, max_shift, size=2)
         noise = GaussianNoise(float(rng.uniform(*noise_std)))
         burst = simulate_burst(read_image(photo), model.frames, tuple(shift), noise, rng)
-        desc = model.extract(burst, top_k=top_k, **(extract_options or {}))["descriptors"].astype(np.float64)
+        desc = model.extract(burst, top_k=top_k, **{**(extract_options or {}), "whiten": False})["descriptors"].astype(
+            np.float64
+        )
         total = desc.sum(0) if total is None else total + desc.sum(0)
         outer = desc.T @ desc if outer is None else outer + desc.T @ desc
         count += len(desc)
