@@ -149,3 +149,12 @@ def test_export_whitened_cli_writes_weights_and_names_a_missing_checkpoint(net, 
     )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "nothing" in err
+
+
+def test_asking_weights_without_whitening_to_whiten_fails_before_any_work(net, tmp_path):
+    from lburst.methods import create
+
+    save_checkpoint(net, tmp_path / "plain.pt")
+    with pytest.raises(ValueError, match="no descriptor whitening"):
+        create(f"lburst:{tmp_path / 'plain.pt'},whiten=true")
+    assert create(f"lburst:{tmp_path / 'plain.pt'}") is not None

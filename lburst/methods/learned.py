@@ -84,7 +84,9 @@ class LearnedExtractor:
         self.model = model
         self.top_k = top_k
         self.options = options
-        replace(MultiScaleConfig(), top_k=top_k, **options)  # ValueError now for a bad option, not per burst
+        cfg = replace(MultiScaleConfig(), top_k=top_k, **options)  # ValueError now for a bad option, not per burst
+        if cfg.whiten:
+            model._check_whitening()
         self.name = "lburst"
 
     def __call__(self, burst: np.ndarray) -> Features:

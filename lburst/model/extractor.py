@@ -202,10 +202,14 @@ class LBurst:
                 )
             self.descriptor_whitening = matrix.to(self.device)
 
-    def _whiten(self, desc: torch.Tensor, dim: int) -> torch.Tensor:
-        """``normalize(W (desc - mean))`` along ``dim`` (``W`` the identity without a matrix)."""
+    def _check_whitening(self) -> None:
+        """``ValueError`` unless the weights carry a descriptor whitening."""
         if self.descriptor_mean is None:
             raise ValueError("these weights carry no descriptor whitening; add it with `lburst export whitened`")
+
+    def _whiten(self, desc: torch.Tensor, dim: int) -> torch.Tensor:
+        """``normalize(W (desc - mean))`` along ``dim`` (``W`` the identity without a matrix)."""
+        self._check_whitening()
         d = desc.float().movedim(dim, -1) - self.descriptor_mean
         if self.descriptor_whitening is not None:
             d = d @ self.descriptor_whitening.T
@@ -321,6 +325,8 @@ class LBurst:
         ``descriptors`` (K, 128) float32, L2-normalised.
         """
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
+        if cfg.whiten:
+            self._check_whitening()
         return self._extract(self._input(burst), cfg)
 
     def _descriptors(self, desc: torch.Tensor, whiten: bool) -> np.ndarray:
