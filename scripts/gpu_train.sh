@@ -4,9 +4,9 @@
 #
 #   scripts/gpu_train.sh [RUN] [SECONDS]
 #
-# RUN      run folder to resume (default training/lburst-b5-relbase, the run behind the
-#          shipped lburst-b5; a new folder starts its recipe, the 'aligned' preset with
-#          --rel-base 0.35, from the shipped lburst-b5)
+# RUN      run folder to resume (default training/lburst-b5-spread, the spread-loss
+#          candidate; a new folder starts its recipe, the 'aligned' preset with
+#          --rel-base 0.35 and --spread-weight 1, from the shipped lburst-b5)
 # SECONDS  training time budget (default 420; the run checkpoints every minute)
 #
 # Training photos: $LBURST_TRAIN_DATA, else data/train512 (a git-ignored copy of
@@ -17,7 +17,7 @@
 # LBURST_DEVICE=cpu LBURST_SPEED=0 runs the same on a CPU (a check of the script).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-run=${1:-training/lburst-b5-relbase}
+run=${1:-training/lburst-b5-spread}
 budget=${2:-420}
 data=${LBURST_TRAIN_DATA:-data/train512}
 device=${LBURST_DEVICE:-cuda}
@@ -33,7 +33,7 @@ workers=$(( $(nproc) > 2 ? $(nproc) - 2 : 1 ))
 if [ -f "$run/last.pt" ]; then
   start=(--resume)
 else
-  start=(--preset aligned --rel-base 0.35 --init lburst/weights/lburst-b5.pt --frames 5 --snapshot-every 100)
+  start=(--preset aligned --rel-base 0.35 --spread-weight 1 --init lburst/weights/lburst-b5.pt --frames 5 --snapshot-every 50)
 fi
 python3 -m lburst.cli train --data "$data" --out "$run" --device "$device" --workers "$workers" \
   --steps 100000 --checkpoint-every 60 --time-budget "$budget" "${start[@]}" 2>&1 | tr '\r' '\n' | tail -n 40 | tee "$out/train.log"
