@@ -86,7 +86,7 @@ class LearnedExtractor:
         self.options = options
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)  # ValueError now for a bad option, not per burst
         if cfg.whiten:
-            model._check_whitening()
+            model.check_whitening()
         self.name = "lburst"
 
     def __call__(self, burst: np.ndarray) -> Features:

@@ -23,7 +23,14 @@ import torch.nn.functional as F
 from lburst.align import align_burst
 from lburst.features import Features
 from lburst.model.fast import FastLBurstNet, descriptors_at
-from lburst.model.network import LBurstNet, check_device, check_precision, load_checkpoint, normalize_burst
+from lburst.model.network import (
+    WHITENING_KEYS,
+    LBurstNet,
+    check_device,
+    check_precision,
+    load_checkpoint,
+    normalize_burst,
+)
 
 
 @dataclass(frozen=True)
@@ -202,14 +209,14 @@ class LBurst:
                 )
             self.descriptor_whitening = matrix.to(self.device)
 
-    def _check_whitening(self) -> None:
+    def check_whitening(self) -> None:
         """``ValueError`` unless the weights carry a descriptor whitening."""
         if self.descriptor_mean is None:
             raise ValueError("these weights carry no descriptor whitening; add it with `lburst export whitened`")
 
     def _whiten(self, desc: torch.Tensor, dim: int) -> torch.Tensor:
         """``normalize(W (desc - mean))`` along ``dim`` (``W`` the identity without a matrix)."""
-        self._check_whitening()
+        self.check_whitening()
         d = desc.float().movedim(dim, -1) - self.descriptor_mean
         if self.descriptor_whitening is not None:
             d = d @ self.descriptor_whitening.T
@@ -243,8 +250,7 @@ class LBurst:
             runner=runner,
             frames=runner.frames,
             align=runner.meta["input"] == "aligned",
-            descriptor_mean=runner.meta.get("descriptor_mean"),
-            descriptor_whitening=runner.meta.get("descriptor_whitening"),
+            **{key: runner.meta.get(key) for key in WHITENING_KEYS},
         )
 
     @classmethod
@@ -267,8 +273,7 @@ class LBurst:
             device,
             frame_order,
             align=align,
-            descriptor_mean=meta.get("descriptor_mean"),
-            descriptor_whitening=meta.get("descriptor_whitening"),
+            **{key: meta.get(key) for key in WHITENING_KEYS},
         )
 
     @classmethod
@@ -326,7 +331,7 @@ class LBurst:
         """
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
         if cfg.whiten:
-            self._check_whitening()
+            self.check_whitening()
         return self._extract(self._input(burst), cfg)
 
     def _descriptors(self, desc: torch.Tensor, whiten: bool) -> np.ndarray:

@@ -262,6 +262,11 @@ def config_from_net_string(net: str) -> NetConfig:
     return NetConfig(frames=inchan // 3)
 
 
+#: ``meta`` entries of a checkpoint (and ONNX metadata) that hold its descriptor whitening
+#: (:mod:`lburst.train.whitening`).
+WHITENING_KEYS = ("descriptor_mean", "descriptor_whitening")
+
+
 def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tuple[LBurstNet, dict]:
     """Load a published or lburst checkpoint safely (``weights_only=True``).
 

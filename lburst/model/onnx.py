@@ -19,7 +19,7 @@ import torch
 from lburst.extras import require
 from lburst.io import atomic_path
 from lburst.model.fast import CoreModule, FastLBurstNet, pad_maps
-from lburst.model.network import CheckpointError, load_checkpoint
+from lburst.model.network import WHITENING_KEYS, CheckpointError, load_checkpoint
 
 
 def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Path:
@@ -56,7 +56,7 @@ def _store_meta(path: Path, meta: dict) -> None:
 
     model = onnx.load(str(path))
     entries = {"lburst.input": str(meta.get("input", "burst"))}
-    for key in ("descriptor_mean", "descriptor_whitening"):
+    for key in WHITENING_KEYS:
         if meta.get(key) is not None:
             entries[f"lburst.{key}"] = json.dumps(np.asarray(meta[key], np.float32).tolist())
     for key, value in entries.items():
@@ -91,7 +91,7 @@ class OnnxRunner:
                 "input": props.get("lburst.input", "burst"),
                 **{
                     k: np.asarray(json.loads(props[f"lburst.{k}"]), np.float32)
-                    for k in ("descriptor_mean", "descriptor_whitening")
+                    for k in WHITENING_KEYS
                     if f"lburst.{k}" in props
                 },
             }
