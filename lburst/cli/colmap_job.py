@@ -5,6 +5,7 @@ no torch, OpenCV or tqdm."""
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 
 from lburst.process import die_with_parent
@@ -18,6 +19,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.parent:
         die_with_parent(args.parent)
+    logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")  # to colmap.log (e.g. models joined)
     run_job(args.job_dir)
     return 0
 

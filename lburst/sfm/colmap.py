@@ -36,6 +36,7 @@ import numpy as np
 
 from lburst.extras import LazyModule
 from lburst.process import folder_lock
+from lburst.sfm.join import join_models
 
 # Imported on first use, after cv2 (see the module docstring), so that importing this
 # module loads neither pycolmap nor OpenCV (nor torch: the child never needs it).
@@ -92,6 +93,12 @@ class ColmapOptions:
         mapper_threads: threads of the mapper; ``None``: ``num_threads``.  Only one thread
             makes incremental mapping repeatable: with two, the same verified pairs of the
             moonless DNG flight mapped to ATE 0.18 % in one run and 10.6 % in two others.
+        join_models: when incremental mapping splits the images into several models, join
+            to the largest those sharing at least two registered images with it
+            (:func:`lburst.sfm.join.join_models`: a similarity from the shared camera poses,
+            then triangulation and bundle adjustment); the largest model alone is kept
+            when the joined one is worse.  (The mapper split a dark looping flight into two
+            models that shared two images and too few 3D points for COLMAP's alignments.)
     """
 
     mapper: str = "incremental"
@@ -108,6 +115,7 @@ class ColmapOptions:
     abs_pose_min_num_inliers: int = 30
     two_view_tracks: bool = False
     mapper_threads: int | None = None
+    join_models: bool = True
 
 
 @dataclass
@@ -295,7 +303,8 @@ def refuse_pairs(db_path: str | Path, image_ids: list[int], pairs: np.ndarray) -
 def map_database(
     db_path: str | Path, image_dir: str | Path, work_dir: str | Path, options: ColmapOptions
 ) -> pycolmap.Reconstruction | None:
-    """Run the mapper; return the model with the most registered images, or ``None`` if none."""
+    """Run the mapper; return the model with the most registered images (joined with the
+    others where ``options.join_models`` says so), or ``None`` if none."""
     pycolmap.set_random_seed(options.seed)
     threads = options.num_threads if options.mapper_threads is None else options.mapper_threads
     work_dir = Path(work_dir)
@@ -310,6 +319,8 @@ def map_database(
         opts.ba_refine_focal_length = options.refine_focal_length
         opts.ba_refine_extra_params = options.refine_extra_params
         models = pycolmap.incremental_mapping(str(db_path), str(image_dir), str(work_dir), opts)
+        if len(models) > 1 and options.join_models:
+            return join_models(models.values(), db_path, image_dir, work_dir, opts)
     elif options.mapper == "global":
         opts = pycolmap.GlobalPipelineOptions()
         opts.num_threads = threads
