@@ -74,3 +74,8 @@ class LazyModule:
     def __repr__(self) -> str:
         state = "loaded" if self._module is not None else "not loaded"
         return f"<lazy module {self._module_name!r} ({state})>"
+
+
+# pycolmap for every module that needs it, imported on first use after cv2 (their bundled
+# zlib/libpng clash; see lburst.sfm.colmap), so importing a module loads neither.
+pycolmap = LazyModule("pycolmap", "reconstruction", before=("cv2",))

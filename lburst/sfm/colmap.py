@@ -34,13 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.extras import LazyModule
+from lburst.extras import pycolmap  # imported on first use, after cv2 (see the module docstring)
 from lburst.process import folder_lock
 from lburst.sfm.join import join_models
-
-# Imported on first use, after cv2 (see the module docstring), so that importing this
-# module loads neither pycolmap nor OpenCV (nor torch: the child never needs it).
-pycolmap = LazyModule("pycolmap", "reconstruction", before=("cv2",))
 
 
 def atomic_path(path: str | Path):

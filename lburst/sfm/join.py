@@ -22,9 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.extras import LazyModule
-
-pycolmap = LazyModule("pycolmap", "reconstruction", before=("cv2",))  # as in lburst.sfm.colmap
+from lburst.extras import pycolmap
 
 log = logging.getLogger(__name__)
 
@@ -227,12 +225,12 @@ def join_models(
     joined = pycolmap.Reconstruction(largest)
     joins = []
     while others:
-        counts = [len(shared_images(joined, rec)) for rec in others]
-        best = int(np.argmax(counts))
-        if counts[best] < 2:
+        shared = [shared_images(joined, rec) for rec in others]
+        best = int(np.argmax([len(ids) for ids in shared]))
+        if len(shared[best]) < 2:
             break
         rec = others.pop(best)
-        names = [joined.images[i].name for i in shared_images(joined, rec)]
+        names = [joined.images[i].name for i in shared[best]]
         sim = sim3_from_shared_images(joined, rec, max_misfit)
         if sim is None or not (added := add_frames(joined, rec, sim)):
             continue
