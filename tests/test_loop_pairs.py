@@ -74,7 +74,8 @@ def false_loop_job(tmp_path, near, two_view_tracks=False):
     """Four views along a line over a random 3D scene, adjacent pairs matched with 150 true
     correspondences each, and a false loop pair (0, 3): 40 matches of extra keypoints that fit
     one epipolar geometry, of other points seen from another pose, as noisy descriptors
-    of unrelated views can."""
+    of unrelated views can.  Returns the job folder and how many scene points are matched in
+    all three adjacent pairs (the true tracks from view 0 to view 3)."""
     rng = np.random.default_rng(1)
     f, size = 300.0, (320, 240)
     points = np.c_[rng.uniform(-6, 14, 4000), rng.uniform(-4, 4, 4000), rng.uniform(8, 14, 4000)]
@@ -85,9 +86,10 @@ def false_loop_job(tmp_path, near, two_view_tracks=False):
         idx = np.flatnonzero(masks[i])[:1500]
         keypoints.append(uvs[i][idx].astype(np.float32) - 0.5)  # lburst's pixel convention
         index.append({p: k for k, p in enumerate(idx)})
-    pairs, matches = [], []
+    pairs, matches, chained = [], [], None
     for a in range(3):
         common = [p for p in index[a] if p in index[a + 1]][:150]
+        chained = set(common) if chained is None else chained & set(common)
         pairs.append((a, a + 1))
         matches.append(np.array([[index[a][p], index[a + 1][p]] for p in common]))
     other = np.c_[rng.uniform(-3, 3, 400), rng.uniform(-2, 2, 400), rng.uniform(6, 9, 400)]
@@ -114,19 +116,19 @@ def false_loop_job(tmp_path, near, two_view_tracks=False):
         **{f"kp_{i}": kp for i, kp in enumerate(keypoints)},
         **{f"m_{p}": m for p, m in enumerate(matches)},
     )
-    return job_dir
+    return job_dir, len(chained)
 
 
 def test_a_false_loop_pair_passes_colmap_but_not_the_loop_test(tmp_path):
     (tmp_path / "images").mkdir()
-    plain = false_loop_job(tmp_path, near=0)
+    plain, _ = false_loop_job(tmp_path, near=0)
     run_job(plain)
     verified = np.load(plain / "verified.npz")
     kept = {tuple(p): len(verified[f"inl_{q}"]) for q, p in enumerate(verified["pairs"])}
     assert set(kept) == {(0, 1), (1, 2), (2, 3), (0, 3)}  # COLMAP verifies the false pair too
     assert kept[(0, 3)] >= 30 and min(kept[(0, 1)], kept[(1, 2)], kept[(2, 3)]) >= 140
 
-    tested = false_loop_job(tmp_path, near=1)
+    tested, chained = false_loop_job(tmp_path, near=1)
     summary = run_job(tested)
     verified = np.load(tested / "verified.npz")
     assert sorted(map(tuple, verified["pairs"].tolist())) == [(0, 1), (1, 2), (2, 3)]
@@ -137,13 +139,15 @@ def test_a_false_loop_pair_passes_colmap_but_not_the_loop_test(tmp_path):
         ids = {image.name: image.image_id for image in db.read_all_images()}
         assert not db.exists_two_view_geometry(ids["v0.png"], ids["v3.png"])
         assert db.exists_two_view_geometry(ids["v0.png"], ids["v1.png"])
+    # the loop's two ends stay tied in the model through the views between them
+    assert chained > 50 and 0.9 * chained <= summary["first_last_points3D"] <= chained
 
 
 def test_two_view_tracks_are_triangulated_when_asked(tmp_path):
     # the adjacent pairs' matches are the first 150 common points of each pair, so many
     # points are matched in one pair only: COLMAP leaves those out unless asked
     (tmp_path / "images").mkdir()
-    ignored = run_job(false_loop_job(tmp_path, near=1))
-    kept = run_job(false_loop_job(tmp_path, near=1, two_view_tracks=True))
+    ignored = run_job(false_loop_job(tmp_path, near=1)[0])
+    kept = run_job(false_loop_job(tmp_path, near=1, two_view_tracks=True)[0])
     assert len(ignored["registered"]) == len(kept["registered"]) == 4
     assert kept["num_points3D"] > ignored["num_points3D"] + 50

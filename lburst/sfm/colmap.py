@@ -362,6 +362,19 @@ def summarize(rec: pycolmap.Reconstruction | None) -> dict:
     }
 
 
+def shared_points3D(rec: pycolmap.Reconstruction | None, name_a: str, name_b: str) -> int | None:
+    """3D points of ``rec`` whose tracks hold both images (names without suffix), ``None`` when
+    either is not registered: how a loop's two ends are tied in the model, directly or through
+    the images between."""
+    if rec is None:
+        return None
+    ids = {Path(rec.images[image_id].name).stem: image_id for image_id in rec.reg_image_ids()}
+    if name_a not in ids or name_b not in ids:
+        return None
+    a, b = ids[name_a], ids[name_b]
+    return sum(1 for point in rec.points3D.values() if {a, b} <= {element.image_id for element in point.track.elements})
+
+
 def export_model(rec: pycolmap.Reconstruction, job_dir: Path) -> None:
     """Write ``job_dir/model`` (COLMAP binary) and ``job_dir/model.ply`` (the 3D points), replacing old ones."""
     tmp = job_dir / "model.tmp"
@@ -414,6 +427,7 @@ def run_job(job_dir: str | Path) -> dict:
     if rec is not None:
         export_model(rec, job_dir)
     summary = summarize(rec)
+    summary["first_last_points3D"] = shared_points3D(rec, job.names[0], job.names[-1])
     summary.update(verify_seconds=round(verified - start, 3), map_seconds=round(mapped - mapping, 3))
     if job.options.near:
         summary.update(loop_threshold=threshold if np.isfinite(threshold) else None, refused_pairs=refused.tolist())

@@ -13,7 +13,8 @@ In the output folder ``OUT``:
   keypoints, -1: unmatched) and ``matching_scores0`` (1 for a mutual nearest neighbour);
 - ``report.md`` with ``trajectory.png`` (top-down, Sim3-aligned to the ground truth
   when there is one) and ``registration.png`` (3D points per keyframe; grey: not
-  registered), and a table of every keyframe.
+  registered), the 3D points the first and last keyframes share (a closed loop ties them),
+  and a table of every keyframe.
 """
 
 from __future__ import annotations
@@ -153,6 +154,11 @@ def write_report(result: "ReconstructionResult", times: dict[str, float], path: 
         lines.append(
             f"ATE {m['ate_rmse']:.4f} m RMSE ({m.get('ate_percent', float('nan')):.3f} % of the path) "
             "after a Sim3 alignment to the ground truth."
+        )
+    if m.get("first_last_points3D") is not None:
+        lines.append(
+            f"The first and last keyframes share {m['first_last_points3D']} 3D points of the model "
+            "(tracks seen in both, directly or through the keyframes between)."
         )
     if result.source_error:
         lines.append(f"Reading the recording stopped early: {result.source_error}")

@@ -508,6 +508,7 @@ def reconstruct_scene(
             near=plan.near,
             loop_threshold=summary.get("loop_threshold"),
             refused_pairs=len(summary.get("refused_pairs", [])),
+            first_last_points3D=summary.get("first_last_points3D"),
         )
     for name, image in summary.get("registered", {}).items():
         result.registered.append(name)
