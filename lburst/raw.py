@@ -18,7 +18,10 @@ photos, so a linear 16-bit frame is turned into what they saw:
    and the blocks average the noise away (a burst of N frames and 4x4 blocks: its
    standard deviation / sqrt(16 N)), so ``P`` is the scene's bright end and not the
    noise's: on a moonless frame (about 6 counts at white) the 99.5th percentile of
-   single pixels is 2.1 times white, of the binned mean 1.0 times;
+   single pixels is 2.1 times white, of the binned mean 1.0 times.  ``target`` is 0.94,
+   the median of the same statistic over the training photos (``scripts/bright_end.py``:
+   0.938 over the 680 photos, a quarter of them under 0.83), so the bright end of a
+   normalised recording sits where that of a typical training photo does;
 3. ``curve='linear'`` (default): no tone curve, the gain alone, which is what a
    mean-preserving noisy 8-bit frame (the training noise, the video path) looks like;
    ``curve='srgb'``: the sRGB transfer curve (IEC 61966-2-1), whose steep foot (slope
@@ -118,7 +121,7 @@ class Normalisation:
 
     gain: str | float = "auto"
     percentile: float = 99.5
-    target: float = 0.8
+    target: float = 0.94
     max_gain: float = 4096.0
     curve: str = "linear"
     binning: int = 4

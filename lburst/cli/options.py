@@ -28,7 +28,7 @@ def add_recording_arguments(p) -> None:
         "--raw-gain",
         default="auto",
         help="linear 16-bit frames: 'auto' (the first burst's mean, binned 4x4: its 99.5th luminance "
-        "percentile to 0.8, then 8 bit), 'none' (keep linear), or a fixed gain",
+        "percentile to 0.94, then 8 bit), 'none' (keep linear), or a fixed gain",
     )
     g.add_argument(
         "--raw-curve",
