@@ -7,7 +7,9 @@ the frames' timestamps, for a folder the last number in each file name (so a gap
 numbering is a dropped frame), or the position when the names carry no distinct
 numbers.  Timestamps are the video's, or ``index / fps`` for a folder.
 
-Keyframes are frames ``start, start + every, start + 2 every, ...``; the burst of
+Keyframes are frames ``start, start + every, start + 2 every, ...``, or, with
+``motion``, the frames from ``start`` on where the view has moved that fraction of the
+image width since the last keyframe (:mod:`lburst.keyframes`); the burst of
 keyframe ``k`` is frames ``k - N//2 .. k + N//2`` (``N = burst``, odd), in temporal
 order, keyframe in the middle.  A frame of the window the recording lacks (before its
 first frame, after its last, or dropped) is replaced by the nearest frame of the window
@@ -41,6 +43,7 @@ from typing import Iterator
 import numpy as np
 
 from lburst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_key, read_image
+from lburst.keyframes import MotionGate, MotionTracker, thumbnail
 from lburst.raw import RAW_SUFFIXES, Normalisation, normalise, read_dng
 
 DEFAULT_FPS = 30.0
@@ -52,7 +55,8 @@ class RecordingOptions:
 
     Attributes:
         burst: frames per burst (odd).
-        every: a keyframe every this many frames.
+        every: a keyframe every this many frames (without ``motion``).
+        motion: take keyframes by motion instead (:class:`lburst.keyframes.MotionGate`).
         start: index of the first keyframe.
         fps: frame rate of a frame folder (default: its ``meta.json``, else 30).
         normalisation: brightness normalisation of linear 16-bit frames.
@@ -65,6 +69,7 @@ class RecordingOptions:
     fps: float | None = None
     normalisation: Normalisation = field(default_factory=Normalisation)
     max_frames: int | None = None
+    motion: MotionGate | None = None
 
     def __post_init__(self) -> None:
         if self.burst < 1 or self.burst % 2 == 0:
@@ -75,10 +80,11 @@ class RecordingOptions:
             raise ValueError("start must be >= 0 and fps positive")
 
     def signature(self) -> str:
-        """What changes the bursts (for caches): burst, every, start, fps, normalisation."""
+        """What changes the bursts (for caches): burst, every or motion, start, fps, normalisation."""
         n = self.normalisation
+        spacing = f"every={self.every}" if self.motion is None else f"motion={self.motion.threshold}/{self.motion.size}"
         return (
-            f"burst={self.burst},every={self.every},start={self.start},fps={self.fps},"
+            f"burst={self.burst},{spacing},start={self.start},fps={self.fps},"
             f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain},"
             f"curve={n.curve},binning={n.binning}"
         )
@@ -269,19 +275,14 @@ class Recording:
     def bursts(self) -> Iterator[tuple[Keyframe, np.ndarray]]:
         """``(keyframe, burst (N, H, W, 3))`` in temporal order (module docstring); the burst is
         normalised (uint8) when the frames are linear 16-bit and the normalisation asks for it."""
+        if self.options.motion is not None:
+            yield from self._motion_bursts(self.options.motion)
+            return
         o = self.options
         half = o.burst // 2
         buffer: dict[int, Frame] = {}
         next_key = o.start
-        first: Frame | None = None
-        for frame in self.frames():
-            if first is None:
-                first = frame
-            elif frame.image.shape != first.image.shape or frame.image.dtype != first.image.dtype:
-                raise BurstError(
-                    f"{frame.source}: frame {frame.index} is {_describe(frame.image)}, "
-                    f"the first frame ({first.source}) {_describe(first.image)}; mixed frame sizes"
-                )
+        for frame in self._checked_frames():
             while next_key + half < frame.index:
                 yield from self._emit(next_key, buffer)
                 next_key += o.every
@@ -292,6 +293,45 @@ class Recording:
         while buffer and next_key <= max(buffer):
             yield from self._emit(next_key, buffer)
             next_key += o.every
+
+    def _motion_bursts(self, gate: MotionGate) -> Iterator[tuple[Keyframe, np.ndarray]]:
+        """Every frame from ``start`` on is a candidate once its window is read; a keyframe when ``gate`` says so."""
+        half = self.options.burst // 2
+        buffer: dict[int, Frame] = {}
+        thumbs: dict[int, np.ndarray] = {}
+        tracker = MotionTracker(gate)
+
+        def consider(candidate: int) -> Iterator[tuple[Keyframe, np.ndarray]]:
+            if candidate < self.options.start or candidate not in buffer:
+                return
+            if tracker.is_keyframe([thumbs[i] for i in range(candidate - half, candidate + half + 1) if i in thumbs]):
+                yield from self._emit(candidate, buffer)
+
+        newest = None
+        for frame in self._checked_frames():
+            buffer[frame.index] = frame
+            thumbs[frame.index] = thumbnail(frame.image, gate.size)
+            for candidate in range(frame.index - half if newest is None else newest + 1 - half, frame.index - half + 1):
+                yield from consider(candidate)
+            newest = frame.index
+            for i in [i for i in buffer if i < frame.index - 2 * half]:
+                del buffer[i], thumbs[i]
+        if newest is not None:
+            for candidate in range(newest - half + 1, newest + 1):
+                yield from consider(candidate)
+
+    def _checked_frames(self) -> Iterator[Frame]:
+        """:meth:`frames`, refusing a frame whose size or type differs from the first one's."""
+        first: Frame | None = None
+        for frame in self.frames():
+            if first is None:
+                first = frame
+            elif frame.image.shape != first.image.shape or frame.image.dtype != first.image.dtype:
+                raise BurstError(
+                    f"{frame.source}: frame {frame.index} is {_describe(frame.image)}, "
+                    f"the first frame ({first.source}) {_describe(first.image)}; mixed frame sizes"
+                )
+            yield frame
 
     def _emit(self, key: int, buffer: dict[int, Frame]) -> Iterator[tuple[Keyframe, np.ndarray]]:
         if key not in buffer:

@@ -160,3 +160,12 @@ def test_a_frame_folder_with_a_frame_rewritten_at_the_same_size_is_extracted_aga
     assert main(["extract", str(folder), *args, str(tmp_path / "fresh")]) == 0
     fresh = read_features_npz(tmp_path / "fresh" / "rec" / "f000004_t0.200s.npz")
     np.testing.assert_array_equal(after["keypoints"], fresh["keypoints"])
+
+
+def test_extract_takes_keyframes_by_motion(recordings, tmp_path, capsys):
+    args = ["extract", str(recordings / "f.mp4"), "--method", "orb", "--out", str(tmp_path / "m")]
+    assert main([*args, "--motion", "0.1", "--every", "4"]) == 2
+    assert "give --every or --motion, not both" in capsys.readouterr().err
+    assert main([*args, "--motion", "0.1"]) == 0
+    keys = sorted(int(p.name[1:7]) for p in (tmp_path / "m" / "f").glob("*.npz"))
+    assert keys[0] == 0 and 2 <= len(keys) < 33, keys  # a turning camera: keyframes, but not every frame

@@ -56,7 +56,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "bursts",
         nargs="+",
         type=Path,
-        help="burst folders, images or videos (a whole video is one burst unless --every is given), "
+        help="burst folders, images or videos (a whole video is one burst unless --every or --motion is given), "
         "or recordings: features of each keyframe burst go to OUT/<recording>/<keyframe>.npz",
     )
     p.add_argument("--out", type=Path, required=True, help="output folder for <burst>.npz")
@@ -176,7 +176,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     for path in tqdm(args.bursts, desc=f"extract {spec}", unit="burst"):
-        if is_recording(path) and (path.is_dir() or args.every is not None):
+        if is_recording(path) and (path.is_dir() or args.every is not None or args.motion is not None):
             new, old, problem = extract_recording(path, extractor, args, method, finished)
             tqdm.write(f"{path}: {new} keyframes extracted, {old} already done")
             done += 1

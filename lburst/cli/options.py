@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from lburst.keyframes import MotionGate
 from lburst.matching import DEFAULT, available, create
 from lburst.sources import DEFAULT_FPS, Normalisation, RecordingOptions
 
@@ -20,6 +21,13 @@ def add_recording_arguments(p) -> None:
         help="frames per burst, odd, centred on each keyframe (default 5)",
     )
     g.add_argument("--every", type=int, help="a keyframe every this many frames (default 10)")
+    g.add_argument(
+        "--motion",
+        type=float,
+        metavar="F",
+        help="instead of --every: a keyframe once the view has moved F of the image width since the last one "
+        "(median optical flow of burst-averaged thumbnails; 0.05-0.2)",
+    )
     g.add_argument("--start", type=int, default=0, help="frame index of the first keyframe (default 0)")
     g.add_argument(
         "--fps", type=float, help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})"
@@ -40,12 +48,15 @@ def add_recording_arguments(p) -> None:
 
 def recording_options(args) -> RecordingOptions:
     """:class:`RecordingOptions` from :func:`add_recording_arguments`' options (``ValueError`` if bad)."""
+    if args.every is not None and args.motion is not None:
+        raise ValueError("give --every or --motion, not both")
     return RecordingOptions(
         burst=args.burst_frames,
         every=args.every or 10,
         start=args.start,
         fps=args.fps,
         normalisation=Normalisation(gain=args.raw_gain, curve=args.raw_curve),
+        motion=None if args.motion is None else MotionGate(args.motion),
     )
 
 
