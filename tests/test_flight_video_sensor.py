@@ -47,3 +47,22 @@ def test_the_low_light_video_is_the_dng_flights_raw_frames_through_the_camera(tm
     other = camera_isp(raw_frame(cfg, radiance, np.random.default_rng([cfg.seed, 9, j]))[0], sensor)
     error = np.abs(decoded[j].astype(int) - same).mean()
     assert error < 0.5 * np.abs(decoded[j].astype(int) - other).mean()  # the same draw, up to yuv420p
+
+
+def test_the_video_is_the_same_whatever_cpus_the_encoder_may_use(tmp_path):
+    pytest.importorskip("av")
+    import os
+
+    from lburst.scenes.flight_recording import write_flight_video
+
+    cpus = os.sched_getaffinity(0)
+    if len(cpus) < 2:
+        pytest.skip("needs two CPUs to compare against one")
+    cfg = NightFlightConfig(n_bursts=2, width=320, height=240, noise="lowlight:moonless")
+    many = write_flight_video(tmp_path / "many.mp4", cfg, progress=False).read_bytes()
+    os.sched_setaffinity(0, {min(cpus)})
+    try:
+        one = write_flight_video(tmp_path / "one.mp4", cfg, progress=False).read_bytes()
+    finally:
+        os.sched_setaffinity(0, cpus)
+    assert one == many  # x264 picks its thread count from the CPUs: the writer fixes it

@@ -118,7 +118,9 @@ def write_flight_video(path: str | Path, cfg: NightFlightConfig, crf: int = 16, 
         with av.open(str(tmp), mode="w", format="mp4", options={"movflags": "+faststart"}) as container:
             stream = container.add_stream("libx264", rate=rate)
             stream.width, stream.height, stream.pix_fmt = cfg.width, cfg.height, "yuv420p"
-            stream.options = {"crf": str(crf), "preset": "medium"}
+            # x264's output depends on its thread count, which it takes from the CPUs it may use:
+            # one thread makes the video the same on every machine
+            stream.options = {"crf": str(crf), "preset": "medium", "threads": "1"}
             for j, _, image in _rendered(cfg, progress, f"video {path.name}"):
                 if bayer:
                     rgb = camera_isp(raw_frame(cfg, image, np.random.default_rng([cfg.seed, 3, j]))[0], noise)
