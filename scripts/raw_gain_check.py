@@ -52,17 +52,19 @@ def main() -> None:
     sensor = noise_from_spec(cfg.noise)  # the scene's white in linear units: its counts over the ADC's range
     white = sensor.photons * sensor.quantum_efficiency / sensor.gain_e_per_adu / (2**sensor.adc_bits - 1 - BLACK_LEVEL)
     single = float(np.percentile(np.asarray(first, np.float32) / 65535 @ LUMA, 99.5))
+    target = Normalisation().target
     auto = Normalisation().estimate_gain(first)
     print(
         f"99.5th luminance percentile: single pixels {single / white:.2f} x white, "
-        f"binned burst mean {0.8 / auto / white:.2f} x white"
+        f"binned burst mean {target / auto / white:.2f} x white"
     )
     variants: dict[str, tuple[float | None, str] | None] = {
         "none (linear uint16)": (None, "linear"),
         "srgb, gain 0.8/P(pixels)": (0.8 / single, "srgb"),
         "linear, gain 0.8/P(pixels)": (0.8 / single, "linear"),
-        "linear, gain auto (binned)": (auto, "linear"),
-        "srgb, gain auto (binned)": (auto, "srgb"),
+        "linear, gain 0.8/P(binned)": (auto * 0.8 / target, "linear"),
+        f"linear, gain auto ({target:g}/P(binned))": (auto, "linear"),
+        f"srgb, gain auto ({target:g}/P(binned))": (auto, "srgb"),
     }
     bursts: dict[str, dict[int, np.ndarray]] = {}
     if args.video:
