@@ -16,9 +16,12 @@ not every ``K`` frames.  :class:`MotionTracker` decides that from the frames alo
   zoom counts by how far the median pixel moves.
 
 A candidate becomes a keyframe when its motion reaches ``threshold``, or when it can no
-longer be registered to the last keyframe (the view changed too much to measure).  Every
-frame is a candidate, in temporal order, the first one always a keyframe, so the warp
-only ever has to follow one frame's motion.
+longer be registered to the last keyframe but can be to the candidate before it (the view
+changed too much to measure).  A candidate that registers to neither (a black or
+featureless view, or one lost in noise) is not a keyframe: nothing in it can be measured,
+so a lens cap or a dark stretch makes no keyframes.  Every frame is a candidate, in
+temporal order, the first one always a keyframe, so the warp only ever has to follow one
+frame's motion.
 """
 
 from __future__ import annotations
@@ -29,6 +32,11 @@ import cv2
 import numpy as np
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)
+
+MIN_CORRELATION = 0.5
+"""A registration counts when the warped thumbnails correlate at least this much: 0.8-1.0
+between views of the moonless flight up to 32 frames apart, at most 0.15 between two
+thumbnails of pure noise."""
 
 
 def thumbnail(image: np.ndarray, size: int) -> np.ndarray:
@@ -42,7 +50,8 @@ def thumbnail(image: np.ndarray, size: int) -> np.ndarray:
 
 def register(reference: np.ndarray, view: np.ndarray, start: np.ndarray | None = None) -> np.ndarray | None:
     """The affine warp ``(2, 3)`` from ``reference``'s pixels to where they are in ``view`` (ECC, started
-    from ``start``, else from the translation phase correlation finds), or ``None`` if it does not converge."""
+    from ``start``, else from the translation phase correlation finds), or ``None`` if it does not
+    converge or the two correlate less than :data:`MIN_CORRELATION` under it."""
     if reference.shape != view.shape:
         raise ValueError(f"thumbnails of different shapes: {reference.shape} and {view.shape}")
     a, b = _standard(reference), _standard(view)
@@ -53,10 +62,10 @@ def register(reference: np.ndarray, view: np.ndarray, start: np.ndarray | None =
         warp = start.astype(np.float32).copy()
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-5)
     try:
-        _, warp = cv2.findTransformECC(a, b, warp, cv2.MOTION_AFFINE, criteria, None, 3)
+        correlation, warp = cv2.findTransformECC(a, b, warp, cv2.MOTION_AFFINE, criteria, None, 3)
     except cv2.error:
         return None
-    return warp if np.all(np.isfinite(warp)) else None
+    return warp if correlation >= MIN_CORRELATION and np.all(np.isfinite(warp)) else None
 
 
 def displacement(warp: np.ndarray, shape: tuple[int, int]) -> float:
@@ -102,11 +111,13 @@ class MotionTracker:
         self.gate = gate
         self.reference: np.ndarray | None = None
         self.warp: np.ndarray | None = None
+        self.previous: np.ndarray | None = None
 
     def is_keyframe(self, burst_thumbnails: list[np.ndarray]) -> bool:
         """Whether the candidate whose burst has these frame thumbnails is a keyframe; if so it
         becomes the reference."""
         view = np.mean(burst_thumbnails, axis=0)
+        previous, self.previous = self.previous, view
         if self.reference is not None:
             warp = register(self.reference, view, self.warp)
             if warp is None and self.warp is not None:
@@ -114,5 +125,7 @@ class MotionTracker:
             if warp is not None and displacement(warp, view.shape) < self.gate.threshold:
                 self.warp = warp
                 return False
+            if warp is None and (previous is None or register(previous, view) is None):
+                return False  # nothing in the view can be measured
         self.reference, self.warp = view, None
         return True

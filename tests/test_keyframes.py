@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from lburst.io import write_image
-from lburst.keyframes import MotionGate, apparent_motion, thumbnail
+from lburst.keyframes import MotionGate, MotionTracker, apparent_motion, thumbnail
 from lburst.sources import RecordingOptions, open_recording
 
 
@@ -79,3 +79,14 @@ def test_motion_options_are_checked(tmp_path):
     with pytest.raises(ValueError, match="different shapes"):
         apparent_motion(np.zeros((4, 6), np.float32), np.zeros((6, 4), np.float32))
     assert RecordingOptions(motion=MotionGate(0.1)).signature() != RecordingOptions(motion=MotionGate(0.2)).signature()
+
+
+def test_views_with_nothing_to_measure_make_no_keyframes():
+    rng = np.random.default_rng(4)
+    black = np.zeros((72, 96), np.float32)
+    noise = [rng.normal(100, 30, (72, 96)).astype(np.float32) for _ in range(30)]
+    scene = thumbnail(_texture(rng)[:192, :256], 96)
+    tracker = MotionTracker(MotionGate(0.1))
+    assert [tracker.is_keyframe([black]) for _ in range(10)] == [True] + [False] * 9  # a lens cap
+    assert not any(tracker.is_keyframe([n]) for n in noise)  # nothing but noise
+    assert [tracker.is_keyframe([scene]) for _ in range(3)] == [False, True, False]  # a view again: one keyframe
