@@ -4,7 +4,7 @@
 #
 #   scripts/gpu_train.sh [RUN] [SECONDS]
 #
-# RUN      run folder to resume (default training/lburst-b5-spread3); a new folder starts
+# RUN      run folder to resume (default training/lburst-b5-spread4); a new folder starts
 #          the recipe of the shipped lburst-b5 (training/lburst-b5-spread: the 'aligned'
 #          preset with --rel-base 0.35 and --spread-weight 1) from the shipped lburst-b5
 # SECONDS  training time budget (default 420; the run checkpoints every minute)
@@ -17,7 +17,7 @@
 # LBURST_DEVICE=cpu LBURST_SPEED=0 runs the same on a CPU (a check of the script).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-run=${1:-training/lburst-b5-spread3}
+run=${1:-training/lburst-b5-spread4}
 budget=${2:-420}
 data=${LBURST_TRAIN_DATA:-data/train512}
 device=${LBURST_DEVICE:-cuda}
