@@ -31,8 +31,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-_LUMA = np.array([0.299, 0.587, 0.114], np.float32)
-
 MIN_CORRELATION = 0.5
 """A registration counts when the warped thumbnails correlate at least this much: 0.8-1.0
 between views of the moonless flight up to 32 frames apart, at most 0.15 between two
@@ -40,11 +38,11 @@ thumbnails of pure noise."""
 
 
 def thumbnail(image: np.ndarray, size: int) -> np.ndarray:
-    """Luminance of an RGB ``(H, W, 3)`` frame (any dtype), area-averaged to ``size`` on the long side, float32."""
+    """Luminance of an RGB ``(H, W, 3)`` uint8/uint16 frame, area-averaged to ``size`` on the long side, float32."""
     h, w = image.shape[:2]
     scale = size / max(h, w)
     shape = (max(1, round(w * scale)), max(1, round(h * scale)))
-    luma = image.astype(np.float32) @ _LUMA
+    luma = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY).astype(np.float32)  # 0.299 R + 0.587 G + 0.114 B, per pixel rounded
     return cv2.resize(luma, shape, interpolation=cv2.INTER_AREA)
 
 
