@@ -311,7 +311,8 @@ class Recording:
         for frame in self._checked_frames():
             buffer[frame.index] = frame
             thumbs[frame.index] = thumbnail(frame.image, gate.size)
-            for candidate in range(frame.index - half if newest is None else newest + 1 - half, frame.index - half + 1):
+            first_new = frame.index if newest is None else newest + 1  # frames read since the last one
+            for candidate in range(first_new - half, frame.index - half + 1):
                 yield from consider(candidate)
             newest = frame.index
             for i in [i for i in buffer if i < frame.index - 2 * half]:

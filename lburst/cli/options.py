@@ -26,7 +26,7 @@ def add_recording_arguments(p) -> None:
         type=float,
         metavar="F",
         help="instead of --every: a keyframe once the view has moved F of the image width since the last one "
-        "(median optical flow of burst-averaged thumbnails; 0.05-0.2)",
+        "(median pixel shift of burst-averaged thumbnails registered by ECC; 0.05-0.2)",
     )
     g.add_argument("--start", type=int, default=0, help="frame index of the first keyframe (default 0)")
     g.add_argument(

@@ -9,8 +9,8 @@ so the bursts of the scene version are the frames around ``j = i * burst_spacing
 (:mod:`lburst.tum`) with the frame's timestamp, and the camera (PINHOLE, exact) and frame
 rate in the recording's ``meta.json`` (see :mod:`lburst.sources` for where they go).
 
-- **Video** (:func:`write_flight_video`): encoded with H.264 (``crf``), ``yuv420p``,
-  ``faststart``.  With a sensor noise model (``lowlight:...``) a frame is what a drone's
+- **Video** (:func:`write_flight_video`): encoded with H.264 (``crf``, one x264 thread,
+  so that the file is the same on every machine), ``yuv420p``, ``faststart``.  With a sensor noise model (``lowlight:...``) a frame is what a drone's
   camera makes of the very raw frame the DNG version stores (same Bayer sensor, same noise
   draw): :func:`camera_isp` subtracts the black level, demosaics (bilinear), scales white
   to 255 and rounds to 8 bits.  A Bayer sensor samples one colour per pixel, so it has a
