@@ -9,6 +9,14 @@ common frame appears at ``(x + dx, y + dy)`` in frame ``k``, i.e.
 ``frame_k(p + shifts[k]) ~ common(p)``; the common frame's shift is ``(0, 0)``.  A
 burst moving at a constant apparent velocity ``(u, v)`` px/frame has
 ``shifts[k] = (k - N // 2) * (u, v)``.
+
+Methods: ``'phase'`` (phase correlation at full resolution), ``'ecc'`` (phase
+correlation refined by ECC at full resolution: the reference, about 0.5-1 s per
+1024x768 5-frame burst on one core) and ``'pyramid'`` (phase correlation on a 4x
+downsampled grey image, refined by ECC on a 2x downsampled one: within about 0.02 px
+of ``'ecc'`` on simulated bursts, noise up to std 100 of 255 and ``lowlight:night``,
+at about 0.03 s per burst; see ``scripts/align_speed.py``).  :func:`align_burst` uses
+``'pyramid'`` by default.
 """
 
 from __future__ import annotations
@@ -19,10 +27,16 @@ import cv2
 import numpy as np
 
 from lburst.extras import require
-from lburst.frames import check_burst, dtype_max, gray_unit, time_offsets
+from lburst.frames import check_burst, gray_unit, time_offsets
 
-Method = Literal["phase", "ecc"]
+Method = Literal["phase", "ecc", "pyramid"]
 Motion = Literal["free", "linear"]
+METHODS = ("phase", "ecc", "pyramid")
+
+#: ``'pyramid'``: ECC runs at the smallest power-of-two downsampling with at most this many pixels
+PYRAMID_MAX_PIXELS = 1 << 19
+#: ``'pyramid'``: the coarse phase correlation runs one level below, if its short side keeps this many pixels
+PYRAMID_COARSE_MIN_SIDE = 64
 
 
 def phase_shift(reference: np.ndarray, image: np.ndarray, window: np.ndarray, upsample: int = 100) -> np.ndarray:
@@ -45,12 +59,14 @@ def ecc_shift(
     smoothing: int = 5,
     margin: int = 8,
     iterations: int = 100,
+    eps: float = 1e-6,
 ) -> np.ndarray:
     """Refine ``initial`` ``(dx, dy)`` by maximising the enhanced correlation coefficient (OpenCV ECC).
 
     The images are smoothed by a ``smoothing``-pixel Gaussian inside OpenCV; pixels
-    within ``margin`` of the border (plus the initial shift) are ignored.  If ECC
-    fails to converge the initial shift is returned.
+    within ``margin`` of the border (plus the initial shift) are ignored.  ECC stops
+    after ``iterations`` or when an update moves the shift by less than ``eps`` px.  If
+    ECC fails to converge the initial shift is returned.
     """
     h, w = reference.shape
     pad = margin + int(np.ceil(np.abs(initial).max()))
@@ -60,12 +76,91 @@ def ecc_shift(
     else:
         mask[:] = 1
     warp = np.array([[1, 0, initial[0]], [0, 1, initial[1]]], np.float32)
-    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, iterations, 1e-6)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, iterations, eps)
     try:
         _, warp = cv2.findTransformECC(reference, image, warp, cv2.MOTION_TRANSLATION, criteria, mask, smoothing)
     except cv2.error:
         return np.asarray(initial, np.float64)
     return warp[:, 2].astype(np.float64)
+
+
+def pyramid_scales(height: int, width: int, max_pixels: int = PYRAMID_MAX_PIXELS) -> tuple[int, int]:
+    """Downsampling factors ``(fine, coarse)`` of :func:`pyramid_shifts` for ``height x width`` frames.
+
+    ``fine``: the smallest power of two leaving at most ``max_pixels`` pixels (2 for
+    1024x768, 1 for 640x480); ``coarse``: ``2 * fine`` if its short side keeps
+    :data:`PYRAMID_COARSE_MIN_SIDE` pixels, else ``fine``.
+    """
+    fine = 1
+    while (height // fine) * (width // fine) > max_pixels and min(height, width) // (2 * fine) >= 2:
+        fine *= 2
+    coarse = 2 * fine if min(height, width) // (2 * fine) >= PYRAMID_COARSE_MIN_SIDE else fine
+    return fine, coarse
+
+
+def _downsample(image: np.ndarray, factor: int) -> np.ndarray:
+    """``image`` (H, W) float32 averaged over ``factor x factor`` blocks (the right/bottom remainder
+    dropped, so that pixel ``i`` covers ``factor * i .. factor * i + factor - 1`` and shifts scale by
+    exactly ``1 / factor``)."""
+    if factor == 1:
+        return image
+    h, w = (image.shape[0] // factor), (image.shape[1] // factor)
+    return cv2.resize(image[: h * factor, : w * factor], (w, h), interpolation=cv2.INTER_AREA)
+
+
+def _gray_float(frame: np.ndarray) -> np.ndarray:
+    """Luma of one RGB frame (H, W, 3) uint8/uint16 as float32 on the dtype's scale (OpenCV, rounded to the dtype)."""
+    return cv2.cvtColor(np.ascontiguousarray(frame), cv2.COLOR_RGB2GRAY).astype(np.float32)
+
+
+def coarse_shift(reference: np.ndarray, image: np.ndarray, window: np.ndarray) -> np.ndarray:
+    """Shift ``(dx, dy)`` of ``image`` relative to ``reference`` (both ``(H, W)`` float32) by
+    OpenCV's windowed phase correlation (sub-pixel by a weighted centroid of the peak,
+    about 0.1 px); ``(0, 0)`` when it is undefined (e.g. flat images)."""
+    (dx, dy), _ = cv2.phaseCorrelate(reference, image, window)
+    shift = np.array([dx, dy], np.float64)
+    return shift if np.all(np.isfinite(shift)) else np.zeros(2)
+
+
+def pyramid_shifts(
+    burst: np.ndarray,
+    smoothing: int = 7,
+    iterations: int = 50,
+    eps: float = 1e-4,
+    max_pixels: int = PYRAMID_MAX_PIXELS,
+) -> np.ndarray:
+    """Shifts ``(N, 2)`` float64 of each frame relative to the common frame, coarse to fine.
+
+    Grey frames (OpenCV luma) are averaged down by ``fine`` and ``coarse`` (see
+    :func:`pyramid_scales`: 2 and 4 at 1024x768); OpenCV's phase correlation of the
+    Hann-windowed ``coarse`` images gives a start within a fraction of a pixel, which
+    OpenCV's ECC refines on the ``fine`` images (Gaussian ``smoothing`` px there, stop at
+    ``eps`` px or ``iterations``).  No motion model: :func:`estimate_shifts` fits one.
+    """
+    burst = check_burst(burst)
+    n, h, w = burst.shape[:3]
+    middle = n // 2
+    fine, coarse = pyramid_scales(h, w, max_pixels)
+    fine_frames = [_downsample(_gray_float(frame), fine) for frame in burst]
+    coarse_frames = [_downsample(frame, coarse // fine) for frame in fine_frames]
+    ch, cw = coarse_frames[middle].shape
+    window = cv2.createHanningWindow((cw, ch), cv2.CV_32F)
+    shifts = np.zeros((n, 2), np.float64)
+    for k in range(n):
+        if k == middle:
+            continue
+        start = coarse_shift(coarse_frames[middle], coarse_frames[k], window) * (coarse / fine)
+        refined = ecc_shift(
+            fine_frames[middle],
+            fine_frames[k],
+            start,
+            smoothing=smoothing,
+            margin=max(8 // fine, 2),
+            iterations=iterations,
+            eps=eps,
+        )
+        shifts[k] = refined * fine
+    return shifts
 
 
 def fit_linear(shifts: np.ndarray) -> np.ndarray:
@@ -83,16 +178,22 @@ def estimate_shifts(burst: np.ndarray, method: Method = "phase", motion: Motion 
     Args:
         burst: uint8/uint16 ``(N, H, W, 3)``, temporal order, N odd.
         method: ``'phase'`` (windowed phase correlation with upsampled peak, about
-            0.01-0.1 px on textured images up to noise std 50 of 255) or ``'ecc'``
+            0.01-0.1 px on textured images up to noise std 50 of 255), ``'ecc'``
             (phase correlation refined by OpenCV's ECC on smoothed images: slower,
-            more accurate and more robust at high noise).
+            more accurate and more robust at high noise) or ``'pyramid'``
+            (:func:`pyramid_shifts`: ECC on half-resolution images started by a
+            quarter-resolution phase correlation; about as accurate as ``'ecc'``,
+            about 20x faster).
         motion: ``'free'`` estimates every frame on its own; ``'linear'`` then fits a
             constant velocity through them (robotic bursts), which averages the errors.
     """
-    if method not in ("phase", "ecc"):
-        raise ValueError(f"unknown alignment method {method!r}: use 'phase' or 'ecc'")
+    if method not in METHODS:
+        raise ValueError(f"unknown alignment method {method!r}: use 'phase', 'ecc' or 'pyramid'")
     if motion not in ("free", "linear"):
         raise ValueError(f"unknown motion model {motion!r}: use 'free' or 'linear'")
+    if method == "pyramid":
+        shifts = pyramid_shifts(burst)
+        return fit_linear(shifts) if motion == "linear" else shifts
     frames = gray_unit(burst)
     n, h, w = frames.shape
     middle = n // 2
@@ -122,17 +223,36 @@ def warp_frame(frame: np.ndarray, shift: np.ndarray, interpolation: int = cv2.IN
 
 
 def align_burst(
-    burst: np.ndarray, shifts: np.ndarray | None = None, method: Method = "ecc", motion: Motion = "linear"
+    burst: np.ndarray, shifts: np.ndarray | None = None, method: Method = "pyramid", motion: Motion = "linear"
 ) -> np.ndarray:
-    """Every frame resampled onto the common frame (bilinear, replicated borders), rounded
-    to the burst's dtype: the burst as it would be without its motion (the estimated
-    shifts unless ``shifts`` are given).  The common frame is returned untouched."""
+    """Every frame resampled onto the common frame (bilinear, replicated borders), in
+    the burst's dtype: the burst as it would be without its motion (the estimated
+    shifts unless ``shifts`` are given).  The common frame is returned untouched.
+
+    The warp runs in the burst's dtype (OpenCV, rounded): for uint16 it equals the
+    float warp rounded; for uint8 OpenCV's fixed-point weights differ from it by 1 in
+    about 0.4% of the values."""
     burst = check_burst(burst)
+    n, h, w = burst.shape[:3]
     if shifts is None:
         shifts = estimate_shifts(burst, method=method, motion=motion)
-    top = dtype_max(burst.dtype)
-    out = burst.copy()
-    for k in range(len(burst)):
+    shifts = np.asarray(shifts, np.float64)
+    if shifts.shape != (n, 2):
+        raise ValueError(f"shifts must be ({n}, 2) for a {n}-frame burst, got {shifts.shape}")
+    out = np.empty(burst.shape, burst.dtype)  # C order: every out[k] is a contiguous frame OpenCV writes into
+    for k in range(n):
         if np.any(shifts[k] != 0):
-            out[k] = np.clip(np.rint(warp_frame(burst[k], np.asarray(shifts[k]))), 0, top).astype(burst.dtype)
+            matrix = np.array([[1, 0, shifts[k, 0]], [0, 1, shifts[k, 1]]], np.float32)
+            warped = cv2.warpAffine(
+                np.ascontiguousarray(burst[k]),
+                matrix,
+                (w, h),
+                dst=out[k],
+                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                borderMode=cv2.BORDER_REPLICATE,
+            )
+            if not np.shares_memory(warped, out[k]):
+                out[k] = warped.reshape(out[k].shape)
+        else:
+            out[k] = burst[k]
     return out

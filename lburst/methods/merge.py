@@ -103,7 +103,7 @@ class MergeOptions:
     """Alignment ``method`` (phase correlation, or refined by ECC), ``motion`` model of the
     shifts (``linear``: constant velocity) and the ``reduce`` over frames."""
 
-    method: Literal["phase", "ecc"] = "ecc"
+    method: Literal["phase", "ecc", "pyramid"] = "ecc"
     motion: Literal["free", "linear"] = "linear"
     reduce: Literal["mean", "median"] = "mean"
 
@@ -121,7 +121,7 @@ class AlignThen:
     The burst is aligned once, with these options: an ``inner`` network whose weights
     align the burst themselves (:attr:`lburst.LBurst.align`) has that turned off."""
 
-    def __init__(self, inner: Extractor, method: Method = "ecc", motion: Motion = "linear") -> None:
+    def __init__(self, inner: Extractor, method: Method = "pyramid", motion: Motion = "linear") -> None:
         model = getattr(inner, "model", None)
         if getattr(model, "align", False):
             model.align = False
@@ -138,7 +138,7 @@ class AlignThen:
 class AlignOptions:
     """Alignment ``method`` and ``motion`` model of the shifts, as for ``merge``."""
 
-    method: Literal["phase", "ecc"] = "ecc"
+    method: Literal["phase", "ecc", "pyramid"] = "pyramid"
     motion: Literal["free", "linear"] = "linear"
 
 
