@@ -22,6 +22,8 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "onnxscript": ("onnxscript", "onnx"),
     "matplotlib": ("matplotlib", "viz"),
     "tensorboard": ("tensorboard", "tensorboard"),
+    "openvino": ("openvino", "openvino"),
+    "nncf": ("nncf", "openvino"),
 }
 
 

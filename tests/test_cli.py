@@ -14,6 +14,7 @@ import torch
 from lburst.cli import COMMANDS, build_parser, main
 from lburst.io import atomic_path, remove_stale_temporaries, save_burst
 from lburst.model import network as model_module
+from lburst.model import precision as precision_module
 
 RUN_CLI = "import sys; from lburst.cli import main; sys.exit(main(sys.argv[1:]))"
 
@@ -106,10 +107,10 @@ def test_device_cuda_without_cuda_is_one_clear_line(tmp_path):
 
 
 def test_bf16_on_a_cpu_without_native_bf16_warns(monkeypatch):
-    monkeypatch.setattr(model_module, "_cpu_flags", lambda: {"sse2", "avx2"})
+    monkeypatch.setattr(precision_module, "cpu_flags", lambda: {"sse2", "avx2"})
     with pytest.warns(RuntimeWarning, match="without native bf16"):
         model_module.check_precision("bf16", "cpu")
-    monkeypatch.setattr(model_module, "_cpu_flags", lambda: {"avx2", "amx_bf16"})
+    monkeypatch.setattr(precision_module, "cpu_flags", lambda: {"avx2", "amx_bf16"})
     model_module.check_precision("bf16", "cpu")  # no warning: checked by -W error in pytest's filter below
     model_module.check_precision("fp32", "cpu")
 

@@ -95,9 +95,9 @@ def test_training_memory_format_auto_follows_the_device_and_cpu(monkeypatch):
     import lburst.model.network as model
 
     assert training_memory_format("cuda", "auto") is torch.channels_last
-    monkeypatch.setattr(model, "_cpu_flags", lambda: {"avx2", "fma"})
+    monkeypatch.setattr(model, "cpu_flags", lambda: {"avx2", "fma"})
     assert training_memory_format("cpu", "auto") is torch.contiguous_format
-    monkeypatch.setattr(model, "_cpu_flags", lambda: {"avx2", "avx512f"})
+    monkeypatch.setattr(model, "cpu_flags", lambda: {"avx2", "avx512f"})
     assert training_memory_format("cpu", "auto") is torch.channels_last
     with pytest.raises(ValueError, match="memory format must be"):
         training_memory_format("cpu", "nchw")

@@ -22,7 +22,8 @@ import torch.nn.functional as F
 
 from lburst.align import align_burst
 from lburst.features import Features
-from lburst.model.fast import FastLBurstNet, descriptors_at
+from lburst.model.fast import FastLBurstNet, descriptor_stride, descriptors_at
+from lburst.model.lite import LiteNet
 from lburst.model.network import (
     WHITENING_KEYS,
     LBurstNet,
@@ -31,6 +32,7 @@ from lburst.model.network import (
     load_checkpoint,
     normalize_burst,
 )
+from lburst.model.runtimes import choose_runtime, inference_form, make_runner
 
 
 @dataclass(frozen=True)
@@ -151,6 +153,19 @@ def _local_maxima(rep: torch.Tensor, rel: torch.Tensor, cfg: MultiScaleConfig) -
     return yx[:, 0], yx[:, 1]
 
 
+def _kth_best(scores: list[torch.Tensor], k: int | None) -> float:
+    """The ``k``-th best of the ``scores`` of the first list entry, and of all entries
+    together: keypoints below it cannot reach the final top ``k``, so their descriptors are
+    not sampled (``-inf`` when there are fewer than ``k``; the result is unchanged)."""
+    if k is None or k == 0:
+        return float("-inf") if k is None else float("inf")
+    best = float("-inf")
+    for pool in (scores[0], torch.cat(scores)):
+        if len(pool) >= k:
+            best = max(best, torch.topk(pool, k, sorted=False).values.min().item())
+    return best
+
+
 class LBurst:
     """Feature extractor for robotic bursts (or single images with a 1-frame net).
 
@@ -191,6 +206,7 @@ class LBurst:
         self.align = bool(align) and self.frames > 1
         self._perm = frame_permutation(self.frames, frame_order)
         self._runner = runner
+        self.runtime = "torch" if runner is None else type(runner).__name__
         self._reduced: dict[str, FastLBurstNet] = {}
         self.descriptor_mean = self.descriptor_whitening = None
         if descriptor_whitening is not None and descriptor_mean is None:
@@ -226,7 +242,7 @@ class LBurst:
     def fast_net(self) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
         """The fast form of the network (built on first use): ``x -> (rep, rel, half)``."""
         if self._runner is None:
-            self._runner = FastLBurstNet(self.net).to(self.device).eval()
+            self._runner = inference_form(self.net).to(self.device).eval()
         return self._runner
 
     def _fast_level(self, x: torch.Tensor, precision: str):
@@ -234,7 +250,7 @@ class LBurst:
             return self.fast_net(x)
         if precision not in self._reduced:
             check_precision(precision, self.device)
-            self._reduced[precision] = FastLBurstNet(self.net, precision).to(self.device).eval()
+            self._reduced[precision] = inference_form(self.net, precision).to(self.device).eval()
         return self._reduced[precision](x)
 
     @classmethod
@@ -260,28 +276,55 @@ class LBurst:
         device: str | torch.device | None = None,
         frame_order: str = "temporal",
         align: bool | None = None,
+        runtime: str | None = None,
+        threads: int | None = None,
     ) -> "LBurst":
         """Load a published or lburst checkpoint (see :func:`lburst.model.load_checkpoint`).
-        ``align`` defaults to what the checkpoint's ``meta['input']`` says."""
+        ``align`` defaults to what the checkpoint's ``meta['input']`` says.
+
+        ``runtime`` (CPU only): one of :data:`lburst.model.runtimes.RUNTIMES`, ``'auto'`` for
+        the fastest one on this CPU (:func:`lburst.model.runtimes.choose_runtime`), or ``None``:
+        ``'auto'`` for the light network, ``'torch'`` (the fast path in fp32) for the
+        Fast-Quad-L2-Net.  ``threads``: the runtime's threads (default: torch's setting)."""
         device = check_device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         net, extra = load_checkpoint(path, device)
         meta = extra.get("meta") if isinstance(extra.get("meta"), dict) else {}
         if align is None:
             align = meta.get("input") == "aligned"
-        return cls(
+        threads = threads or torch.get_num_threads()
+        if runtime is None:
+            runtime = "auto" if isinstance(net, LiteNet) and device.type == "cpu" else "torch"
+        if runtime == "auto":
+            runtime = choose_runtime(threads=threads) if device.type == "cpu" else "torch"
+        if runtime != "torch" and device.type != "cpu":
+            raise ValueError(f"runtime {runtime!r} runs on the CPU only; on {device.type} use 'torch'")
+        runner = None if runtime == "torch" else make_runner(runtime, net, threads=threads, meta=meta)
+        model = cls(
             net,
             device,
             frame_order,
+            runner=runner,
             align=align,
             **{key: meta.get(key) for key in WHITENING_KEYS},
         )
+        model.runtime = runtime
+        return model
 
     @classmethod
-    def pretrained(cls, name: str = "lburst-b5", device: str | torch.device | None = None) -> "LBurst":
-        """Load weights shipped with the package (``'lburst-b5'`` or ``'lburst-b1'``)."""
+    def pretrained(
+        cls,
+        name: str = "lburst-b5",
+        device: str | torch.device | None = None,
+        runtime: str | None = None,
+        threads: int | None = None,
+    ) -> "LBurst":
+        """Load weights shipped with the package: ``'lburst-b5'`` (the most accurate),
+        ``'lburst-b5-lite'`` (the light network: several times faster, run by the fastest
+        runtime of the CPU) or ``'lburst-b1'`` (single images).  ``runtime``, ``threads``:
+        as :meth:`from_checkpoint`."""
         from lburst.weights import weights_path
 
-        return cls.from_checkpoint(weights_path(name), device)
+        return cls.from_checkpoint(weights_path(name), device, runtime=runtime, threads=threads)
 
     def _input(self, burst: np.ndarray) -> torch.Tensor:
         burst = np.asarray(burst)
@@ -308,7 +351,9 @@ class LBurst:
         """
         x = self._input(burst)
         rep, rel, half = self.fast_net(x)
-        desc = F.normalize(F.interpolate(half, scale_factor=2.0, mode="bilinear", align_corners=False), dim=1)
+        stride = descriptor_stride(half.shape[-1], x.shape[-1])
+        desc = F.interpolate(half, scale_factor=float(stride), mode="bilinear", align_corners=False)
+        desc = F.normalize(desc[..., : x.shape[-2], : x.shape[-1]], dim=1)
         if whiten:
             desc = self._whiten(desc, dim=1)
         h, w = x.shape[-2:]
@@ -334,17 +379,37 @@ class LBurst:
             self.check_whitening()
         return self._extract(self._input(burst), cfg)
 
+    @torch.inference_mode()
+    def extract_batch(self, bursts, top_k: int | None = 4000, **options) -> list[Features]:
+        """:meth:`extract` of several bursts of one size, run through each pyramid level as
+        one batch (what pays on a GPU; on a CPU it equals a loop over :meth:`extract`).
+        ``bursts``: a sequence of bursts, or an array ``(B, N, H, W, 3)``.  Each result equals
+        :meth:`extract` of that burst up to float rounding."""
+        cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
+        if cfg.whiten:
+            self.check_whitening()
+        inputs = [self._input(burst) for burst in bursts]
+        if not inputs:
+            return []
+        shapes = {tuple(x.shape) for x in inputs}
+        if len(shapes) > 1:
+            raise ValueError(f"extract_batch takes bursts of one size, got {sorted(shapes)}")
+        return self._extract(torch.cat(inputs), cfg)
+
     def _descriptors(self, desc: torch.Tensor, whiten: bool) -> np.ndarray:
         return (self._whiten(desc, dim=1) if whiten else desc).float().cpu().numpy()
 
-    def _extract(self, x: torch.Tensor, cfg: MultiScaleConfig) -> Features:
+    def _extract(self, x: torch.Tensor, cfg: MultiScaleConfig) -> Features | list[Features]:
+        """Multi-scale features of the normalised bursts ``x`` (B, 3N, H, W): one features dict
+        when B is 1 (what :meth:`extract` returns), else a list of B."""
         height, width = x.shape[-2:]
         if min(height, width) < MIN_SIDE:
             raise ValueError(f"a {width}x{height} image is too small for features (at least {MIN_SIDE} px a side)")
         if cfg.fast and self.net is not None:  # channels-last once: each level is resized in that layout
             x = x.contiguous(memory_format=torch.channels_last)
+        batch = x.shape[0]
         long_side = max(height, width)
-        xs, ys, scales, scores, descs = [], [], [], [], []
+        found: list[list[tuple]] = [[] for _ in range(batch)]  # per burst: (x, y, scale, score, desc) per level
         s = 1.0
         lowest = max(cfg.min_scale, cfg.min_size / long_side)
         if s + 0.001 < lowest:  # an image smaller than min_size: one level at its own size
@@ -354,38 +419,46 @@ class LBurst:
                 h, w = x.shape[-2:]
                 if cfg.fast or self.net is None:
                     rep, rel, half = self._fast_level(x, cfg.precision)
-                    y, xx = _local_maxima(rep, rel, cfg)
-                    descs.append(descriptors_at(half, y, xx))
+                    stride = descriptor_stride(half.shape[-1], w)
                 else:
                     out = self.net(x)
                     rep, rel = out["repeatability"], out["reliability"]
-                    y, xx = _local_maxima(rep, rel, cfg)
-                    descs.append(out["descriptors"][0, :, y, xx].t())
-                if cfg.published_coordinates:
-                    xs.append(xx.float() * width / w)
-                    ys.append(y.float() * height / h)
-                else:
-                    xs.append((xx.float() + 0.5) * (width / w) - 0.5)
-                    ys.append((y.float() + 0.5) * (height / h) - 0.5)
-                scales.append(torch.full((len(y),), 32 / s, device=x.device))
-                scores.append(rep[0, 0, y, xx] * rel[0, 0, y, xx])
+                for b in range(batch):
+                    y, xx = _local_maxima(rep[b : b + 1], rel[b : b + 1], cfg)
+                    score = rep[b, 0, y, xx] * rel[b, 0, y, xx]
+                    keep = score >= _kth_best([score] + [level[3] for level in found[b]], cfg.top_k)
+                    y, xx, score = y[keep], xx[keep], score[keep]
+                    if cfg.fast or self.net is None:
+                        desc = descriptors_at(half[b : b + 1], y, xx, stride)
+                    else:
+                        desc = out["descriptors"][b, :, y, xx].t()
+                    if cfg.published_coordinates:
+                        px, py = xx.float() * width / w, y.float() * height / h
+                    else:
+                        px, py = (xx.float() + 0.5) * (width / w) - 0.5, (y.float() + 0.5) * (height / h) - 0.5
+                    found[b].append((px, py, torch.full((len(y),), 32 / s, device=x.device), score, desc))
             s /= cfg.scale_factor
             if min(height, width) * s < MIN_SIDE:
                 break
             if s + 0.001 >= lowest:  # a next level: resize the last one
                 size = (round(height * s), round(width * s))
                 x = F.interpolate(x, size, mode="bilinear", align_corners=False)
-        if not scores:
+        if not found[0]:
             raise ValueError(
                 f"no pyramid level between max_size {cfg.max_size} and min_size {cfg.min_size} "
                 f"for a {width}x{height} image"
             )
-        score = torch.cat(scores)
-        k = len(score) if cfg.top_k is None else min(cfg.top_k, len(score))
-        order = torch.topk(score, k, sorted=True).indices
+        results = [self._select(levels, cfg) for levels in found]
+        return results[0] if batch == 1 else results
+
+    def _select(self, levels: list[tuple], cfg: MultiScaleConfig) -> Features:
+        """The ``top_k`` best keypoints of one burst over its pyramid levels, by decreasing score."""
+        xs, ys, scales, scores, descs = (torch.cat(parts) for parts in zip(*levels))
+        k = len(scores) if cfg.top_k is None else min(cfg.top_k, len(scores))
+        order = torch.topk(scores, k, sorted=True).indices
         return {
-            "keypoints": torch.stack([torch.cat(xs), torch.cat(ys)], -1)[order].float().cpu().numpy(),
-            "scales": torch.cat(scales)[order].float().cpu().numpy(),
-            "scores": score[order].float().cpu().numpy(),
-            "descriptors": self._descriptors(torch.cat(descs)[order], cfg.whiten),
+            "keypoints": torch.stack([xs, ys], -1)[order].float().cpu().numpy(),
+            "scales": scales[order].float().cpu().numpy(),
+            "scores": scores[order].float().cpu().numpy(),
+            "descriptors": self._descriptors(descs[order], cfg.whiten),
         }

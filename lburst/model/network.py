@@ -25,7 +25,6 @@ size and the last row/column can never hold a keypoint, as in the published code
 from __future__ import annotations
 
 import re
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -34,52 +33,18 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lburst.model.lite import LITE_NAME, LiteConfig, LiteNet
+from lburst.model.precision import (  # noqa: F401  (re-exported)
+    AUTOCAST_DTYPES,
+    NATIVE_BF16_FLAGS,
+    autocast_dtype,
+    check_precision,
+    cpu_flags,
+)
 from lburst.noise import IMAGENET_MEAN, IMAGENET_STD
-
-#: autocast dtype of each precision the network can run in (``None``: plain fp32)
-AUTOCAST_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
-
-
-def autocast_dtype(precision: str) -> torch.dtype | None:
-    """The autocast dtype of ``precision`` (``None`` for fp32); ``ValueError`` for another name."""
-    if precision not in AUTOCAST_DTYPES:
-        raise ValueError(f"precision must be fp32, bf16 or fp16, got {precision!r}")
-    return AUTOCAST_DTYPES[precision]
-
 
 #: Class name written into checkpoints, as in the published files.
 NET_NAME = "Fast_Quad_L2Net_ConfCFS"
-
-
-NATIVE_BF16_FLAGS = ("avx512_bf16", "amx_bf16")  # /proc/cpuinfo flags of CPUs with bf16 arithmetic
-
-
-def _cpu_flags() -> set[str] | None:
-    """The CPU's feature flags from ``/proc/cpuinfo``, or ``None`` where it cannot be read."""
-    try:
-        text = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return None
-    for line in text.splitlines():
-        if line.startswith("flags"):
-            return set(line.split(":", 1)[1].split())
-    return None
-
-
-def check_precision(precision: str, device: torch.device | str) -> None:
-    """Warn when ``bf16`` runs on a CPU without native bf16 (no ``avx512_bf16`` or ``amx_bf16``):
-    it works there, emulated, about 3x slower than fp32."""
-    autocast_dtype(precision)
-    if precision != "bf16" or torch.device(device).type != "cpu":
-        return
-    flags = _cpu_flags()
-    if flags is not None and not flags.intersection(NATIVE_BF16_FLAGS):
-        warnings.warn(
-            "--precision bf16 on a CPU without native bf16 (no avx512_bf16 or amx_bf16 in /proc/cpuinfo) "
-            "runs about 3x slower than fp32",
-            RuntimeWarning,
-            stacklevel=2,
-        )
 
 
 def training_memory_format(device: torch.device | str, name: str = "auto") -> torch.memory_format:
@@ -89,7 +54,7 @@ def training_memory_format(device: torch.device | str, name: str = "auto") -> to
     backward 17.4 s channels-last, 13.6 s contiguous; ``scripts/train_speed.py``)."""
     formats = {"channels_last": torch.channels_last, "contiguous": torch.contiguous_format}
     if name == "auto":
-        flags = _cpu_flags()
+        flags = cpu_flags()
         cpu_without_avx512 = torch.device(device).type == "cpu" and flags is not None and "avx512f" not in flags
         name = "contiguous" if cpu_without_avx512 else "channels_last"
     if name not in formats:
@@ -267,8 +232,20 @@ def config_from_net_string(net: str) -> NetConfig:
 WHITENING_KEYS = ("descriptor_mean", "descriptor_whitening")
 
 
-def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tuple[LBurstNet, dict]:
-    """Load a published or lburst checkpoint safely (``weights_only=True``).
+def network_from_net_string(net: str) -> LBurstNet | LiteNet:
+    """An untrained network of the architecture a checkpoint's ``net`` string names:
+    the Fast-Quad-L2-Net (published layout) or the light network (:mod:`lburst.model.lite`)."""
+    if isinstance(net, str) and net.startswith(LITE_NAME):
+        try:
+            return LiteNet(LiteConfig.from_net_string(net))
+        except ValueError as exc:
+            raise CheckpointError(str(exc)) from exc
+    return LBurstNet(config_from_net_string(net))
+
+
+def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tuple[LBurstNet | LiteNet, dict]:
+    """Load a published or lburst checkpoint safely (``weights_only=True``): a Fast-Quad-L2-Net
+    or a light network (:mod:`lburst.model.lite`), as its ``net`` string says.
 
     Returns the network in eval mode on ``device`` and the checkpoint's other
     entries (``net`` and, for our own files, ``meta``).
@@ -284,11 +261,10 @@ def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tup
     if not isinstance(ckpt, dict) or "state_dict" not in ckpt or "net" not in ckpt:
         raise CheckpointError(f"{path}: expected a dict with 'net' and 'state_dict'")
     try:
-        config = config_from_net_string(ckpt["net"])
+        net = network_from_net_string(ckpt["net"])
     except CheckpointError as exc:
         raise CheckpointError(f"{path}: {exc}") from exc
     state = {k.removeprefix("module."): v for k, v in ckpt["state_dict"].items()}
-    net = LBurstNet(config)
     try:
         net.load_state_dict(state, strict=True)
     except RuntimeError as exc:
@@ -314,7 +290,7 @@ def replicate_frames(net: LBurstNet, frames: int) -> LBurstNet:
     return wide
 
 
-def checkpoint_dict(net: LBurstNet) -> dict:
+def checkpoint_dict(net: LBurstNet | LiteNet) -> dict:
     """``{'net', 'state_dict'}``: ``net`` in the published checkpoint layout, on the CPU."""
     return {"net": net.config.net_string(), "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()}}
 
@@ -327,7 +303,7 @@ def write_checkpoint(checkpoint: dict, path: str | Path) -> None:
         torch.save(checkpoint, tmp)
 
 
-def save_checkpoint(net: LBurstNet, path: str | Path, meta: dict | None = None) -> None:
+def save_checkpoint(net: LBurstNet | LiteNet, path: str | Path, meta: dict | None = None) -> None:
     """Write ``net`` in the published layout (``{'net', 'state_dict'}``) plus ``meta``, atomically."""
     ckpt = checkpoint_dict(net)
     if meta:

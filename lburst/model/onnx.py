@@ -1,10 +1,17 @@
-"""ONNX export of the fast network and an ONNX Runtime backend (``lburst export onnx``).
+"""ONNX export of the fast or the light network and an ONNX Runtime backend (``lburst export onnx``).
 
-The exported graph is :meth:`lburst.model.fast.FastLBurstNet.core`: input ``burst``
-``(1, 3N, H, W)`` (normalised, see :func:`lburst.model.normalize_burst`) with dynamic
-height and width; outputs ``repeatability`` and ``reliability`` ``(1, 1, 2*(H//2),
-2*(W//2))`` and ``half``, the raw half-resolution map.  :class:`OnnxRunner` pads odd
-sizes exactly as the torch path does, so :class:`lburst.LBurst` runs either.
+The exported graph is the inference form's ``core`` with input ``burst`` ``(1, 3N, H, W)``
+(normalised, see :func:`lburst.model.normalize_burst`) of dynamic height and width:
+
+- Fast-Quad-L2-Net: :meth:`lburst.model.fast.FastLBurstNet.core`; outputs ``repeatability``
+  and ``reliability`` ``(1, 1, 2*(H//2), 2*(W//2))`` and ``half``, the raw half-resolution map;
+- light network (:mod:`lburst.model.lite`): :meth:`lburst.model.lite.LiteInference.core`;
+  ``repeatability`` and ``reliability`` ``(1, 1, H, W)`` and ``half``, which is then the raw
+  *quarter*-resolution map ``(1, D, ceil(H/4), ceil(W/4))`` (the extractor tells the two
+  apart by its size, :func:`lburst.model.fast.descriptor_stride`).
+
+:class:`OnnxRunner` pads odd sizes exactly as the torch path does, so :class:`lburst.LBurst`
+runs either.  Other runtimes of the exported graph (OpenVINO, int8): :mod:`lburst.model.runtimes`.
 """
 
 from __future__ import annotations
@@ -19,15 +26,35 @@ import torch
 from lburst.extras import require
 from lburst.io import atomic_path
 from lburst.model.fast import CoreModule, FastLBurstNet, pad_maps
-from lburst.model.network import WHITENING_KEYS, CheckpointError, load_checkpoint
+from lburst.model.lite import LiteNet
+from lburst.model.network import WHITENING_KEYS, CheckpointError, LBurstNet, load_checkpoint
+
+#: names of the exported graph's input and outputs
+INPUT_NAME = "burst"
+OUTPUT_NAMES = ("repeatability", "reliability", "half")
 
 
 def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Path:
-    """Export the checkpoint's fast network to ``out`` (atomically)."""
+    """Export the checkpoint's network (the fast form of a Fast-Quad-L2-Net, or the inference
+    form of a light network) to ``out`` (atomically)."""
+    net, extra = load_checkpoint(checkpoint, "cpu")
+    return export_network_onnx(net, out, extra.get("meta") if isinstance(extra.get("meta"), dict) else {}, opset)
+
+
+def exported_module(net: LBurstNet | LiteNet) -> torch.nn.Module:
+    """The module the ONNX export traces: ``x -> (repeatability, reliability, raw descriptor map)``,
+    one graph for any size (the fast network untiled; the light network's inference form, fp32)."""
+    if isinstance(net, LiteNet):
+        return net.inference("fp32").eval()
+    return CoreModule(FastLBurstNet(net, tiled=False).eval()).eval()
+
+
+def export_network_onnx(net: LBurstNet | LiteNet, out: str | Path, meta: dict | None = None, opset: int = 18) -> Path:
+    """Export ``net`` (:func:`exported_module`) to ``out`` (atomically), with ``meta`` (a
+    checkpoint's ``meta``: input kind and descriptor whitening) kept beside the graph."""
     for module in ("onnx", "onnxscript"):
         require(module, "lburst export onnx")
-    net, extra = load_checkpoint(checkpoint, "cpu")
-    core = CoreModule(FastLBurstNet(net, tiled=False).eval()).eval()  # one graph for any size
+    core = exported_module(net)
     example = torch.randn(1, net.config.in_channels, 96, 128)
     height, width = torch.export.Dim("height", min=32, max=8192), torch.export.Dim("width", min=32, max=8192)
     out = Path(out)
@@ -39,13 +66,13 @@ def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Pat
             str(tmp),
             dynamo=True,
             opset_version=opset,
-            input_names=["burst"],
-            output_names=["repeatability", "reliability", "half"],
+            input_names=[INPUT_NAME],
+            output_names=list(OUTPUT_NAMES),
             dynamic_shapes={"x": {2: height, 3: width}},
             external_data=False,
             verbose=False,
         )
-        _store_meta(tmp, extra.get("meta") if isinstance(extra.get("meta"), dict) else {})
+        _store_meta(tmp, meta or {})
     return out
 
 
@@ -55,14 +82,37 @@ def _store_meta(path: Path, meta: dict) -> None:
     import onnx
 
     model = onnx.load(str(path))
+    for key, value in meta_props(meta).items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = key, value
+    onnx.save(model, str(path))
+
+
+def meta_props(meta: dict) -> dict[str, str]:
+    """A checkpoint's ``meta`` as the ``lburst.*`` strings kept beside an exported graph:
+    ``lburst.input`` (``'burst'`` or ``'aligned'``) and the descriptor whitening as JSON."""
     entries = {"lburst.input": str(meta.get("input", "burst"))}
     for key in WHITENING_KEYS:
         if meta.get(key) is not None:
             entries[f"lburst.{key}"] = json.dumps(np.asarray(meta[key], np.float32).tolist())
-    for key, value in entries.items():
-        entry = model.metadata_props.add()
-        entry.key, entry.value = key, value
-    onnx.save(model, str(path))
+    return entries
+
+
+def parse_meta(props: dict[str, str], path: str | Path) -> dict:
+    """What :func:`_store_meta` kept (``lburst.*`` entries of ``props``): ``{'input': 'burst' or
+    'aligned', 'descriptor_mean'?, 'descriptor_whitening'?}``; :class:`CheckpointError` naming
+    ``path`` when unreadable."""
+    try:
+        return {
+            "input": props.get("lburst.input", "burst"),
+            **{
+                k: np.asarray(json.loads(props[f"lburst.{k}"]), np.float32)
+                for k in WHITENING_KEYS
+                if f"lburst.{k}" in props
+            },
+        }
+    except ValueError as exc:
+        raise CheckpointError(f"{path}: unreadable lburst metadata ({exc})") from exc
 
 
 class OnnxRunner:
@@ -85,20 +135,9 @@ class OnnxRunner:
         if not isinstance(channels, int) or channels % 3:
             raise CheckpointError(f"{path}: input has {channels} channels, not 3N")
         self.frames = channels // 3
-        props = self.session.get_modelmeta().custom_metadata_map
-        try:
-            self.meta = {
-                "input": props.get("lburst.input", "burst"),
-                **{
-                    k: np.asarray(json.loads(props[f"lburst.{k}"]), np.float32)
-                    for k in WHITENING_KEYS
-                    if f"lburst.{k}" in props
-                },
-            }
-        except ValueError as exc:
-            raise CheckpointError(f"{path}: unreadable lburst metadata ({exc})") from exc
+        self.meta = parse_meta(self.session.get_modelmeta().custom_metadata_map, path)
 
     def __call__(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        arrays = self.session.run(None, {"burst": x.contiguous().cpu().numpy()})
+        arrays = self.session.run(None, {INPUT_NAME: x.contiguous().cpu().numpy()})
         rep, rel, half = (torch.from_numpy(a) for a in arrays)
         return pad_maps(rep, rel, x.shape[-2:]) + (half,)
