@@ -68,6 +68,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         type=float,
         help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)",
     )
+    p.add_argument(
+        "--arch", choices=("lburst", "lite"), help="network: lburst (Fast-Quad-L2-Net) or lite (the light network)"
+    )
+    p.add_argument(
+        "--teacher",
+        help="distil from this frozen network on the same noisy bursts (a checkpoint or a shipped name, e.g. lburst-b5)",
+    )
     p.add_argument("--init", help="start from this checkpoint of our own (e.g. lburst/weights/lburst-b5.pt)")
     p.add_argument("--seed", type=int)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -92,6 +99,8 @@ def given_options(args: argparse.Namespace) -> dict:
         "rel_base": args.rel_base,
         "distill_weight": args.distill_weight,
         "spread_weight": args.spread_weight,
+        "arch": args.arch,
+        "teacher": args.teacher,
         "init": args.init,
         "checkpoint_every_s": args.checkpoint_every,
     }

@@ -25,6 +25,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from lburst.io import atomic_path
+from lburst.model.lite import LiteConfig, LiteNet
 from lburst.model.network import (
     CheckpointError,
     LBurstNet,
@@ -42,6 +43,7 @@ from lburst.model.network import (
 from lburst.noise import IMAGENET_MEAN, IMAGENET_STD
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
+from lburst.train.distill import lite_distillation_step, teacher_form
 from lburst.train.losses import (
     APSampling,
     cosim_loss,
@@ -53,7 +55,20 @@ from lburst.train.losses import (
 )
 from lburst.train.pairs import PairConfig
 
-LOG_FIELDS = ("step", "seconds", "loss", "cosim", "peaky", "reliability", "ap", "distill", "spread")
+LOG_FIELDS = (
+    "step",
+    "seconds",
+    "loss",
+    "cosim",
+    "peaky",
+    "reliability",
+    "ap",
+    "distill",
+    "spread",
+    "distill_desc",
+    "distill_rep",
+    "distill_rel",
+)
 
 
 @dataclass(frozen=True)
@@ -91,6 +106,15 @@ class TrainConfig:
     repeatability with both maps above 0.7), so that keypoint descriptors keep no common component
     (:func:`lburst.train.losses.spread_loss`).
 
+    ``arch`` is the network trained: ``'lburst'`` (the Fast-Quad-L2-Net of lburst-b5) or
+    ``'lite'`` (:class:`lburst.model.lite.LiteNet`, the light network).
+
+    ``teacher`` (a checkpoint of this project's own, or a shipped name such as
+    ``'lburst-b5'``) makes the distillation target another network: the teacher, frozen,
+    in eval mode, on the same noisy bursts A and B as the student, at every pixel
+    (descriptors and both maps), instead of the network itself on the noise-free burst.
+    This is how the light network learns from lburst-b5.
+
     ``init`` starts the weights from a checkpoint of this project's own (for example the
     shipped ``lburst-b5``) instead of at random; the optimizer starts fresh.  A
     single-image checkpoint starts a burst run through :func:`lburst.model.replicate_frames`
@@ -116,6 +140,8 @@ class TrainConfig:
     rel_base: float = 0.5
     distill_weight: float = 0.0
     spread_weight: float = 0.0
+    arch: str = "lburst"
+    teacher: str | None = None
     init: str | None = None
     seed: int = 0
     workers: int = 1
@@ -170,6 +196,43 @@ PRESETS["burst"] = dict(
 #: single-image weights (``--init lburst/weights/lburst-b1.pt``), which it then equals on
 #: the burst's mean.
 PRESETS["aligned"] = dict(PRESETS["burst"], pair=replace(PRESETS["burst"]["pair"], align_error_px=0.25))
+#: ``lite``: the light network (:mod:`lburst.model.lite`) from scratch, on the bursts of
+#: lburst-b5's recipe (``aligned``), with lburst-b5 as its dense teacher on the same noisy
+#: bursts beside R2D2's repeatability losses (:mod:`lburst.train.distill`; no AP or spread
+#: term: the descriptors and the reliability come from the teacher), and a higher learning
+#: rate for a network from scratch.
+PRESETS["lite"] = dict(
+    PRESETS["aligned"],
+    arch="lite",
+    teacher="lburst-b5",
+    distill_weight=1.0,
+    ap_weight=0.0,
+    rel_logit_weight=0.0,
+    spread_weight=0.0,
+    lr=5e-4,
+)
+ARCHS = ("lburst", "lite")
+
+
+def build_network(arch: str, frames: int) -> torch.nn.Module:
+    """An untrained network of the architecture ``arch`` (``'lburst'`` or ``'lite'``)."""
+    if arch == "lburst":
+        return LBurstNet(NetConfig(frames=frames))
+    if arch == "lite":
+        return LiteNet(LiteConfig(frames=frames))
+    raise ValueError(f"unknown architecture {arch!r}: use {' or '.join(ARCHS)}")
+
+
+def load_teacher(spec: str, frames: int, device: torch.device) -> torch.nn.Module:
+    """The frozen teacher network named by ``spec`` (a checkpoint file or a shipped name)."""
+    from lburst.weights import resolve_weights
+
+    teacher, _ = load_checkpoint(resolve_weights(spec), device)
+    if teacher.config.frames != frames:
+        raise ValueError(f"teacher {spec}: a {teacher.config.frames}-frame network, but the run has {frames} frames")
+    for p in teacher.parameters():
+        p.requires_grad_(False)
+    return teacher.eval()
 
 
 def _normalise(burst: torch.Tensor) -> torch.Tensor:
@@ -194,11 +257,14 @@ def training_step(
     teacher: torch.nn.Module | None = None,
     memory_format: torch.memory_format = torch.channels_last,
     spread_weight: float = 0.0,
+    teacher_on_noisy: bool = False,
 ) -> dict[str, torch.Tensor]:
     """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``).
 
     With ``distill_weight`` > 0 the batch holds ``clean_a`` and ``teacher`` (the network
-    itself, unwrapped) runs on it in eval mode without gradient."""
+    itself, unwrapped) runs on it in eval mode without gradient; with ``teacher_on_noisy``
+    ``teacher`` is another, frozen network run on the same noisy bursts A and B as the
+    student (``TrainConfig.teacher``)."""
     dtype = autocast_dtype(precision)
     n = batch["burst_a"].shape[0]
     x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
@@ -219,7 +285,15 @@ def training_step(
             peaks = (rep == F.max_pool2d(rep, 3, 1, 1)) & (rep > 0.7) & (rel > 0.7)
         losses["spread"] = spread_loss(desc, peaks.float())
         loss = loss + spread_weight * losses["spread"]
-    if distill_weight > 0:
+    if distill_weight > 0 and teacher_on_noisy:
+        if teacher is None:
+            raise ValueError("teacher_on_noisy needs a teacher")
+        with torch.no_grad(), torch.autocast(device_type=x.device.type, dtype=dtype, enabled=dtype is not None):
+            target = teacher(x)
+        student = {k: out[k].float() for k in ("descriptors", "repeatability", "reliability")}
+        losses["distill"] = distillation_loss(student, {k: target[k].float() for k in student})
+        loss = loss + distill_weight * losses["distill"]
+    elif distill_weight > 0:
         if teacher is None or "clean_a" not in batch:
             raise ValueError("distill_weight > 0 needs a teacher and the batch's clean_a")
         clean = _normalise(batch["clean_a"]).contiguous(memory_format=memory_format)
@@ -232,6 +306,12 @@ def training_step(
         losses["distill"] = distillation_loss(student, {k: v.float() for k, v in target.items()})
         loss = loss + distill_weight * losses["distill"]
     return {"loss": loss, **losses}
+
+
+def finite_gradients(net: torch.nn.Module) -> bool:
+    """Whether every gradient of ``net`` is finite (a NaN or inf loss leaves non-finite ones)."""
+    grads = [p.grad for p in net.parameters() if p.grad is not None]
+    return bool(grads) and bool(torch.stack([torch.isfinite(g).all() for g in grads]).all())
 
 
 def _read_log(path: Path, upto: int) -> list[dict]:
@@ -334,9 +414,11 @@ def train(
     if total < 1:
         raise ValueError(f"a run needs at least 1 step, got {total} (--steps, or --epochs x photos / batch)")
     torch.manual_seed(cfg.seed)
-    net = LBurstNet(NetConfig(frames=cfg.frames))
+    net = build_network(cfg.arch, cfg.frames)
     if cfg.init and state is None:
         init_net, _ = load_checkpoint(cfg.init)
+        if type(init_net) is not type(net):
+            raise ValueError(f"{cfg.init}: not a network of the run's architecture {cfg.arch!r}")
         if init_net.config.frames == 1 and cfg.frames > 1:
             init_net = replicate_frames(init_net, cfg.frames)
         if init_net.config.frames != cfg.frames:
@@ -346,6 +428,10 @@ def train(
         net.load_state_dict(init_net.state_dict())
     layout = training_memory_format(device, memory_format)
     net = net.to(device).to(memory_format=layout)
+    teacher = load_teacher(cfg.teacher, cfg.frames, device).to(memory_format=layout) if cfg.teacher else net
+    lite_distillation = cfg.arch == "lite" and cfg.teacher is not None
+    if lite_distillation:
+        teacher = teacher_form(teacher, cfg.precision).to(device)
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     if state is not None:
         net.load_state_dict(state["state_dict"])
@@ -362,7 +448,7 @@ def train(
             tmp.write_text(json.dumps(_config_dict(cfg), indent=2))
     log = _read_log(out / "log.csv", step)
     loader = DataLoader(
-        PairDataset(photos, cfg.pair, cfg.seed, clean=cfg.distill_weight > 0),
+        PairDataset(photos, cfg.pair, cfg.seed, clean=cfg.distill_weight > 0 and not cfg.teacher),
         batch_size=cfg.batch_size,
         sampler=StreamSampler(step * cfg.batch_size * ctx.world + ctx.rank, ctx.world),
         num_workers=cfg.workers,
@@ -382,30 +468,48 @@ def train(
         total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main), dynamic_ncols=True
     )
     data = iter(loader)
+    skipped = 0
     previous = _stop_on_sigterm()
     try:
         while step < total:
             if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
                 break
             batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
-            losses = training_step(
-                model,
-                batch,
-                cfg.patch,
-                generator,
-                ap_weight=cfg.ap_weight,
-                precision=cfg.precision,
-                rel_logit_weight=cfg.rel_logit_weight,
-                rel_logit_margin=cfg.rel_logit_margin,
-                rel_base=cfg.rel_base,
-                distill_weight=cfg.distill_weight,
-                teacher=net,
-                memory_format=layout,
-                spread_weight=cfg.spread_weight,
-            )
+            if lite_distillation:
+                x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
+                losses = lite_distillation_step(
+                    model,
+                    teacher,
+                    batch,
+                    x.contiguous(memory_format=layout),
+                    cfg.patch,
+                    cfg.distill_weight,
+                    cfg.precision,
+                )
+            else:
+                losses = training_step(
+                    model,
+                    batch,
+                    cfg.patch,
+                    generator,
+                    ap_weight=cfg.ap_weight,
+                    precision=cfg.precision,
+                    rel_logit_weight=cfg.rel_logit_weight,
+                    rel_logit_margin=cfg.rel_logit_margin,
+                    rel_base=cfg.rel_base,
+                    distill_weight=cfg.distill_weight,
+                    teacher=teacher,
+                    memory_format=layout,
+                    spread_weight=cfg.spread_weight,
+                    teacher_on_noisy=cfg.teacher is not None,
+                )
             optimizer.zero_grad(set_to_none=True)
             losses["loss"].backward()
-            optimizer.step()
+            if finite_gradients(net):
+                optimizer.step()
+            else:  # one bad batch must not leave NaN weights behind: skip its update, say so in the log
+                skipped += 1
+                bar.write(f"step {step + 1}: non-finite loss or gradient, update skipped ({skipped} so far)")
             values = ctx.mean(losses)
             step += 1
             if not ctx.main:
