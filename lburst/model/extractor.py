@@ -245,6 +245,12 @@ class LBurst:
             self._runner = inference_form(self.net).to(self.device).eval()
         return self._runner
 
+    def _torch_levels(self, precision: str) -> bool:
+        """Whether the pyramid levels run through a torch module (which wants channels-last input)."""
+        if self.net is None:
+            return False
+        return precision != "fp32" or self._runner is None or isinstance(self._runner, torch.nn.Module)
+
     def _fast_level(self, x: torch.Tensor, precision: str):
         if precision == "fp32" or self.net is None:
             return self.fast_net(x)
@@ -340,7 +346,8 @@ class LBurst:
                 raise ValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
         if self.align and n == self.frames and burst.dtype in (np.uint8, np.uint16):
             burst = align_burst(burst)
-        return normalize_burst(burst[self._perm], self.device)
+        layout = torch.channels_last if self._torch_levels("fp32") else torch.contiguous_format
+        return normalize_burst(burst[self._perm], self.device, layout)
 
     @torch.inference_mode()
     def dense(self, burst: np.ndarray, whiten: bool = False) -> Features:
@@ -405,7 +412,7 @@ class LBurst:
         height, width = x.shape[-2:]
         if min(height, width) < MIN_SIDE:
             raise ValueError(f"a {width}x{height} image is too small for features (at least {MIN_SIDE} px a side)")
-        if cfg.fast and self.net is not None:  # channels-last once: each level is resized in that layout
+        if cfg.fast and self._torch_levels(cfg.precision):  # channels-last once: each level is resized in it
             x = x.contiguous(memory_format=torch.channels_last)
         batch = x.shape[0]
         long_side = max(height, width)

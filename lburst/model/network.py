@@ -186,12 +186,18 @@ def check_float_burst(burst: np.ndarray) -> None:
         raise ValueError(f"a float burst must be in [0, 1], this one spans [{low:g}, {high:g}]{hint}")
 
 
-def normalize_burst(burst: np.ndarray, device: torch.device | str = "cpu") -> torch.Tensor:
+def normalize_burst(
+    burst: np.ndarray,
+    device: torch.device | str = "cpu",
+    memory_format: torch.memory_format = torch.contiguous_format,
+) -> torch.Tensor:
     """Turn a burst ``(N, H, W, 3)`` uint8/uint16/float array into the net's input.
 
     Each frame is scaled to ``[0, 1]`` (by 255 for uint8, 65535 for uint16, unchanged
     for float), normalised with the ImageNet mean and std, and the frames are
-    concatenated on channels in the given order: output ``(1, 3N, H, W)`` float32.
+    concatenated on channels in the given order: output ``(1, 3N, H, W)`` float32 in
+    ``memory_format`` (one pass: the frames are reordered as integers, then converted and
+    scaled in place).
     """
     if burst.ndim != 4 or burst.shape[-1] != 3:
         raise ValueError(f"expected a burst of shape (N, H, W, 3), got {burst.shape}")
@@ -204,13 +210,17 @@ def normalize_burst(burst: np.ndarray, device: torch.device | str = "cpu") -> to
         check_float_burst(burst)
     else:
         raise ValueError(f"unsupported burst dtype {burst.dtype}: use uint8, uint16 or float in [0, 1]")
+    n, h, w, _ = burst.shape
     x = torch.from_numpy(np.ascontiguousarray(burst)).to(device)
-    x = x.to(torch.float32) * scale  # (N, H, W, 3)
-    mean = torch.tensor(IMAGENET_MEAN, device=x.device)
-    std = torch.tensor(IMAGENET_STD, device=x.device)
-    x = (x - mean) / std
-    n, h, w, _ = x.shape
-    return x.permute(0, 3, 1, 2).reshape(1, 3 * n, h, w).contiguous()
+    if memory_format == torch.channels_last:
+        x = x.permute(1, 2, 0, 3).reshape(1, h, w, 3 * n).permute(0, 3, 1, 2)
+    else:
+        x = x.permute(0, 3, 1, 2).reshape(1, 3 * n, h, w)
+    out = torch.empty((1, 3 * n, h, w), device=x.device, memory_format=memory_format)
+    out.copy_(x)
+    std = torch.tensor(IMAGENET_STD, device=x.device).repeat(n).view(1, 3 * n, 1, 1)
+    mean = torch.tensor(IMAGENET_MEAN, device=x.device).repeat(n).view(1, 3 * n, 1, 1)
+    return out.mul_(scale / std).sub_(mean / std)
 
 
 _INCHAN = re.compile(r"inchan\s*=\s*(\d+)")
