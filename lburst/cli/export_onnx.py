@@ -8,9 +8,9 @@ from pathlib import Path
 
 import torch
 
-from lburst.model.fast import FastLBurstNet
 from lburst.model.network import CheckpointError, load_checkpoint
 from lburst.model.onnx import OnnxRunner, export_onnx
+from lburst.model.runtimes import inference_form
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -31,7 +31,7 @@ def main(args: argparse.Namespace) -> int:
         net, _ = load_checkpoint(args.checkpoint, "cpu")
         x = torch.randn(1, net.config.in_channels, 123, 166)
         with torch.inference_mode():
-            ref = FastLBurstNet(net)(x)
+            ref = inference_form(net)(x)
         got = OnnxRunner(out)(x)
         err = max(float((a - b).abs().max()) for a, b in zip(got, ref))
         print(f"max abs difference to torch on a 166x123 input: {err:.2e}")

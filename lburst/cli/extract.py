@@ -24,6 +24,7 @@ from lburst.cli.options import add_recording_arguments, recording_options
 from lburst.io import BurstError, atomic_path, load_burst, read_features_npz, write_features_h5
 from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
+from lburst.model.runtimes import RUNTIMES
 from lburst.sources import is_recording, open_recording
 
 
@@ -77,6 +78,12 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         default="fp32",
         help="backbone precision of learned methods: bf16 is faster on CPUs with AVX512-BF16 or AMX "
         "(heads stay fp32; about 99%% of keypoints within 1 px of fp32), fp16 on a GPU",
+    )
+    p.add_argument(
+        "--runtime",
+        choices=["auto", *RUNTIMES],
+        help="what runs a learned network on the CPU (default: auto, the fastest this CPU has, for the light "
+        "network lburst-lite; torch for the others); the bf16 and int8 runtimes move some keypoints",
     )
     add_recording_arguments(p)
 
@@ -158,6 +165,7 @@ def main(args: argparse.Namespace) -> int:
             "top_k": str(args.top_k),
             "device": args.device,
             "precision": args.precision if args.precision != "fp32" else None,
+            "runtime": args.runtime,
         }
         options = {k: v for k, v in wanted.items() if v is not None and accepts(spec, k)}  # learned methods have them
         extractor = create(spec, **options)

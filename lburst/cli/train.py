@@ -69,7 +69,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)",
     )
     p.add_argument(
-        "--arch", choices=("lburst", "lite"), help="network: lburst (Fast-Quad-L2-Net) or lite (the light network)"
+        "--arch",
+        help="network: lburst (Fast-Quad-L2-Net), lite (the light network), or a light network of other widths, "
+        "e.g. 'LBurstLite(fine=48,coarse=128,dilations=1-2-4-8)'",
     )
     p.add_argument(
         "--teacher",

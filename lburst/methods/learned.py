@@ -12,8 +12,9 @@ from lburst.features import Features
 from lburst.methods import register
 from lburst.model.extractor import LBurst, MultiScaleConfig
 from lburst.model.network import autocast_dtype
+from lburst.model.runtimes import RUNTIMES
 
-DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "r2d2": "lburst-b1"}
+DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "lburst-lite": "lburst-b5-lite", "r2d2": "lburst-b1"}
 
 
 def weights_file(spec: str) -> Path | None:
@@ -39,13 +40,16 @@ def results_key(spec: str) -> str:
 
 @dataclass(frozen=True)
 class LearnedOptions:
-    """Options of a learned method: loading (``frame_order``, ``device``), how many
+    """Options of a learned method: loading (``frame_order``, ``device``, ``runtime``: one of
+    :data:`lburst.model.runtimes.RUNTIMES` or ``auto``, by default ``auto`` for the light
+    network and ``torch`` for the others, see :meth:`lburst.LBurst.from_checkpoint`), how many
     keypoints (``top_k``; ``none``: all) and the :class:`lburst.model.extractor.MultiScaleConfig`
     fields below (the paper's defaults)."""
 
     top_k: int | None = 4000
     frame_order: Literal["temporal", "published"] = "temporal"
     device: str | None = None
+    runtime: str | None = None
     min_size: int = MultiScaleConfig.min_size
     max_size: int = MultiScaleConfig.max_size
     scale_factor: float = MultiScaleConfig.scale_factor
@@ -58,6 +62,8 @@ class LearnedOptions:
 
     def __post_init__(self) -> None:
         autocast_dtype(self.precision)  # a clear error for an unknown precision
+        if self.runtime is not None and self.runtime != "auto" and self.runtime not in RUNTIMES:
+            raise ValueError(f"unknown runtime {self.runtime!r}: use auto or one of {', '.join(RUNTIMES)}")
 
     def multiscale(self) -> dict:
         """The :class:`MultiScaleConfig` fields, for :meth:`LBurst.extract`."""
@@ -94,27 +100,37 @@ class LearnedExtractor:
 
 
 def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtractor:
+    from lburst.weights import resolve_weights
+
     model = (
-        LBurst.from_checkpoint(arg, device=options.device, frame_order=options.frame_order)
+        LBurst.from_checkpoint(
+            resolve_weights(arg), device=options.device, frame_order=options.frame_order, runtime=options.runtime
+        )
         if arg
-        else LBurst.pretrained(default, device=options.device)
+        else LBurst.pretrained(default, device=options.device, runtime=options.runtime)
     )
     return LearnedExtractor(model, options.top_k, **options.multiscale())
 
 
 def _weights(default: str):
     def weights(arg: str | None) -> Path:
-        from lburst.weights import weights_path
+        from lburst.weights import resolve_weights, weights_path
 
-        return Path(arg) if arg else weights_path(default)
+        return resolve_weights(arg) if arg else weights_path(default)
 
     return weights
 
 
 @register("lburst", LearnedOptions, arg="checkpoint", weights=_weights(DEFAULT_WEIGHTS["lburst"]))
 def lburst(arg: str | None, options: LearnedOptions) -> LearnedExtractor:
-    """A burst network: the shipped lburst-b5, or the checkpoint ARG."""
+    """A burst network: the shipped lburst-b5, or the checkpoint ARG (a file or a shipped name)."""
     return _make(arg, DEFAULT_WEIGHTS["lburst"], options)
+
+
+@register("lburst-lite", LearnedOptions, arg="checkpoint", weights=_weights(DEFAULT_WEIGHTS["lburst-lite"]))
+def lburst_lite(arg: str | None, options: LearnedOptions) -> LearnedExtractor:
+    """The light burst network: the shipped lburst-b5-lite (about 10x faster), or the checkpoint ARG."""
+    return _make(arg, DEFAULT_WEIGHTS["lburst-lite"], options)
 
 
 @register("r2d2", LearnedOptions, arg="checkpoint", weights=_weights(DEFAULT_WEIGHTS["r2d2"]))

@@ -25,7 +25,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from lburst.io import atomic_path
-from lburst.model.lite import LiteConfig, LiteNet
+from lburst.model.lite import LITE_NAME, LiteConfig, LiteNet
 from lburst.model.network import (
     CheckpointError,
     LBurstNet,
@@ -106,8 +106,10 @@ class TrainConfig:
     repeatability with both maps above 0.7), so that keypoint descriptors keep no common component
     (:func:`lburst.train.losses.spread_loss`).
 
-    ``arch`` is the network trained: ``'lburst'`` (the Fast-Quad-L2-Net of lburst-b5) or
-    ``'lite'`` (:class:`lburst.model.lite.LiteNet`, the light network).
+    ``arch`` is the network trained: ``'lburst'`` (the Fast-Quad-L2-Net of lburst-b5),
+    ``'lite'`` (:class:`lburst.model.lite.LiteNet`, the light network) or a light network of
+    other widths, named by its net string without ``inchan`` (for example
+    ``'LBurstLite(fine=48,coarse=128,dilations=1-2-4-8-1-2)'``, :class:`LiteConfig`).
 
     ``teacher`` (a checkpoint of this project's own, or a shipped name such as
     ``'lburst-b5'``) makes the distillation target another network: the teacher, frozen,
@@ -214,13 +216,20 @@ PRESETS["lite"] = dict(
 ARCHS = ("lburst", "lite")
 
 
+def is_lite(arch: str) -> bool:
+    """Whether ``arch`` names the light network (``'lite'`` or an ``LBurstLite(...)`` string)."""
+    return arch == "lite" or arch.startswith(LITE_NAME)
+
+
 def build_network(arch: str, frames: int) -> torch.nn.Module:
-    """An untrained network of the architecture ``arch`` (``'lburst'`` or ``'lite'``)."""
+    """An untrained network of the architecture ``arch`` (see :class:`TrainConfig`)."""
     if arch == "lburst":
         return LBurstNet(NetConfig(frames=frames))
     if arch == "lite":
         return LiteNet(LiteConfig(frames=frames))
-    raise ValueError(f"unknown architecture {arch!r}: use {' or '.join(ARCHS)}")
+    if arch.startswith(LITE_NAME):
+        return LiteNet(replace(LiteConfig.from_net_string(arch), frames=frames))
+    raise ValueError(f"unknown architecture {arch!r}: use {', '.join(ARCHS)} or an {LITE_NAME}(...) string")
 
 
 def load_teacher(spec: str, frames: int, device: torch.device) -> torch.nn.Module:
@@ -429,7 +438,7 @@ def train(
     layout = training_memory_format(device, memory_format)
     net = net.to(device).to(memory_format=layout)
     teacher = load_teacher(cfg.teacher, cfg.frames, device).to(memory_format=layout) if cfg.teacher else net
-    lite_distillation = cfg.arch == "lite" and cfg.teacher is not None
+    lite_distillation = is_lite(cfg.arch) and cfg.teacher is not None
     if lite_distillation:
         teacher = teacher_form(teacher, cfg.precision).to(device)
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
