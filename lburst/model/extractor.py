@@ -332,7 +332,9 @@ class LBurst:
 
         return cls.from_checkpoint(weights_path(name), device, runtime=runtime, threads=threads)
 
-    def _input(self, burst: np.ndarray) -> torch.Tensor:
+    def _input(self, burst: np.ndarray, cfg: MultiScaleConfig | None = None) -> tuple[torch.Tensor, float]:
+        """The network's input for ``burst`` and the scale it is at: the full resolution
+        (1.0), or, with ``cfg``, the first pyramid level that ``cfg`` uses (see :meth:`_reduce`)."""
         burst = np.asarray(burst)
         if burst.ndim == 3:  # a single image
             burst = burst[None]
@@ -346,8 +348,43 @@ class LBurst:
                 raise ValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
         if self.align and n == self.frames and burst.dtype in (np.uint8, np.uint16):
             burst = align_burst(burst)
-        layout = torch.channels_last if self._torch_levels("fp32") else torch.contiguous_format
-        return normalize_burst(burst[self._perm], self.device, layout)
+        burst, scale = self._reduce(burst, cfg) if cfg is not None else (burst, 1.0)
+        if scale == 1.0:
+            burst = burst[self._perm]
+        torch_levels = self._torch_levels("fp32") if cfg is None else cfg.fast and self._torch_levels(cfg.precision)
+        layout = torch.channels_last if torch_levels else torch.contiguous_format
+        return normalize_burst(burst, self.device, layout), scale
+
+    def _reduce(self, burst: np.ndarray, cfg: MultiScaleConfig) -> tuple[np.ndarray, float]:
+        """The burst at the first pyramid level ``cfg`` uses, frame by frame in the network's
+        frame order, as float in [0, 1], and that level's scale (the burst unchanged, and
+        1.0, when that level is the full resolution).
+
+        The levels are resized one from the last by bilinear interpolation, as
+        :meth:`_extract` resizes the normalised input; doing it on the frames first keeps a
+        large burst's memory to one frame's float copy (a 4000x3000 burst at the default
+        1024 px) instead of the whole normalised burst at full resolution."""
+        height, width = burst.shape[1:3]
+        long_side = max(height, width)
+        upper = min(cfg.max_scale, cfg.max_size / long_side)
+        lowest = max(cfg.min_scale, cfg.min_size / long_side)
+        s, sizes = 1.0, []
+        while s - 0.001 > upper and s / cfg.scale_factor + 0.001 >= lowest:
+            s /= cfg.scale_factor
+            if min(height, width) * s < MIN_SIDE:
+                break
+            sizes.append((round(height * s), round(width * s)))
+        if not sizes or min(height, width) * s < MIN_SIDE:
+            return burst, 1.0
+        unit = 1 / 255.0 if burst.dtype == np.uint8 else 1 / 65535.0 if burst.dtype == np.uint16 else 1.0
+        frames = []
+        for i in self._perm:
+            t = torch.from_numpy(np.ascontiguousarray(burst[i])).permute(2, 0, 1)[None].to(self.device, torch.float32)
+            t = t * unit if unit != 1.0 else t
+            for size in sizes:
+                t = F.interpolate(t, size, mode="bilinear", align_corners=False)
+            frames.append(t[0].permute(1, 2, 0).cpu().numpy())
+        return np.stack(frames), s
 
     @torch.inference_mode()
     def dense(self, burst: np.ndarray, whiten: bool = False) -> Features:
@@ -356,7 +393,7 @@ class LBurst:
         Returns ``descriptors`` (H, W, D), ``repeatability`` (H, W) and
         ``reliability`` (H, W), float32 NumPy arrays.
         """
-        x = self._input(burst)
+        x, _ = self._input(burst)
         rep, rel, half = self.fast_net(x)
         stride = descriptor_stride(half.shape[-1], x.shape[-1])
         desc = F.interpolate(half, scale_factor=float(stride), mode="bilinear", align_corners=False)
@@ -384,7 +421,8 @@ class LBurst:
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
         if cfg.whiten:
             self.check_whitening()
-        return self._extract(self._input(burst), cfg)
+        x, scale = self._input(burst, cfg)
+        return self._extract(x, cfg, self._full_size(burst), scale)
 
     @torch.inference_mode()
     def extract_batch(self, bursts, top_k: int | None = 4000, **options) -> list[Features]:
@@ -395,21 +433,32 @@ class LBurst:
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
         if cfg.whiten:
             self.check_whitening()
-        inputs = [self._input(burst) for burst in bursts]
-        if not inputs:
+        bursts = list(bursts)
+        if not bursts:
             return []
-        shapes = {tuple(x.shape) for x in inputs}
-        if len(shapes) > 1:
-            raise ValueError(f"extract_batch takes bursts of one size, got {sorted(shapes)}")
-        return self._extract(torch.cat(inputs), cfg)
+        sizes = {self._full_size(burst) for burst in bursts}
+        if len(sizes) > 1:
+            raise ValueError(f"extract_batch takes bursts of one size, got {sorted(sizes)}")
+        inputs = [self._input(burst, cfg) for burst in bursts]
+        x = torch.cat([x for x, _ in inputs])
+        return self._extract(x, cfg, sizes.pop(), inputs[0][1])
+
+    @staticmethod
+    def _full_size(burst) -> tuple[int, int]:
+        """(height, width) of a burst (N, H, W, 3) or an image (H, W, 3)."""
+        shape = np.shape(burst)
+        return (shape[-3], shape[-2]) if len(shape) >= 3 else tuple(shape)
 
     def _descriptors(self, desc: torch.Tensor, whiten: bool) -> np.ndarray:
         return (self._whiten(desc, dim=1) if whiten else desc).float().cpu().numpy()
 
-    def _extract(self, x: torch.Tensor, cfg: MultiScaleConfig) -> Features | list[Features]:
-        """Multi-scale features of the normalised bursts ``x`` (B, 3N, H, W): one features dict
-        when B is 1 (what :meth:`extract` returns), else a list of B."""
-        height, width = x.shape[-2:]
+    def _extract(
+        self, x: torch.Tensor, cfg: MultiScaleConfig, full_size: tuple[int, int] | None = None, start: float = 1.0
+    ) -> Features | list[Features]:
+        """Multi-scale features of the normalised bursts ``x`` (B, 3N, h, w): one features dict
+        when B is 1 (what :meth:`extract` returns), else a list of B.  ``x`` is the bursts at
+        scale ``start`` of their ``full_size`` (H, W) (default: ``x`` is at full size)."""
+        height, width = full_size or x.shape[-2:]
         if min(height, width) < MIN_SIDE:
             raise ValueError(f"a {width}x{height} image is too small for features (at least {MIN_SIDE} px a side)")
         if cfg.fast and self._torch_levels(cfg.precision):  # channels-last once: each level is resized in it
@@ -417,7 +466,7 @@ class LBurst:
         batch = x.shape[0]
         long_side = max(height, width)
         found: list[list[tuple]] = [[] for _ in range(batch)]  # per burst: (x, y, scale, score, desc) per level
-        s = 1.0
+        s = start
         lowest = max(cfg.min_scale, cfg.min_size / long_side)
         if s + 0.001 < lowest:  # an image smaller than min_size: one level at its own size
             lowest = s
