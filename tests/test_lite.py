@@ -147,3 +147,28 @@ def test_a_light_run_with_a_teacher_trains_and_resumes(photos, tmp_path):
     with pytest.raises(ValueError, match="architecture"):
         train([photos], tmp_path / "other", TrainConfig(frames=3, steps=1, workers=0, pair=TINY, init=str(teacher),
                                                         arch="lite"), progress=False)  # fmt: skip
+
+
+def test_the_ap_term_raises_the_students_cross_view_ap(photos):
+    ds = PairDataset(list_photos([photos]), TINY, seed=0)
+    items = [ds[i] for i in range(2)]
+    batch = {k: torch.stack([it[k] for it in items]) for k in items[0]}
+    x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
+    torch.manual_seed(1)
+    teacher = teacher_form(LBurstNet(NetConfig(frames=3)).eval())
+    torch.manual_seed(0)
+    net = LiteNet(LiteConfig(frames=3, fine=16, coarse=32)).train()
+    opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+    aps = []
+    for step in range(25):
+        generator = torch.Generator().manual_seed(step)
+        losses = lite_distillation_step(
+            net, teacher, batch, x, patch=8, distill_weight=0.0, ap_weight=1.0, generator=generator
+        )
+        opt.zero_grad()
+        losses["loss"].backward()
+        opt.step()
+        aps.append(losses["ap"].item())
+    assert "ap" not in lite_distillation_step(net, teacher, batch, x, patch=8)
+    assert 0 <= min(aps) and max(aps) <= 1
+    assert np.mean(aps[-3:]) > np.mean(aps[:3]) + 0.05, aps

@@ -53,6 +53,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         type=float,
         help="weight of the unweighted descriptor AP term (1 - AP) beside R2D2's losses (lburst's presets: 0.25; paper: 0)",
     )
+    p.add_argument("--lr", type=float, help="Adam's learning rate (default: the preset's)")
     p.add_argument(
         "--rel-base",
         type=float,
@@ -98,6 +99,7 @@ def given_options(args: argparse.Namespace) -> dict:
         "tensorboard": args.tensorboard or None,
         "rel_logit_weight": args.rel_logit_weight,
         "ap_weight": args.ap_weight,
+        "lr": args.lr,
         "rel_base": args.rel_base,
         "distill_weight": args.distill_weight,
         "spread_weight": args.spread_weight,

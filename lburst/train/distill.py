@@ -10,8 +10,12 @@ noisy bursts A and B as the student.  The student learns, at every pixel:
 - its repeatability and reliability, against the teacher's, at full resolution: ``|s - t|``;
 
 beside R2D2's self-supervised repeatability losses on the pair (cosine similarity through
-the true flow, peakiness).  Nothing is ever built at full resolution with 128 channels,
-so a step costs about a third of a step of the teacher's own recipe.
+the true flow, peakiness).  With ``ap_weight`` > 0 the descriptors also learn to match
+across the pair: ``ap_weight * (1 - AP)``, R2D2's quantised AP of the student's own
+descriptors (upsampled as at test time) through the true flow
+(:func:`lburst.train.losses.reliability_ap_loss`); distillation alone teaches each view
+separately, and the light network then matched less well across strong viewpoint changes
+than its teacher.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import torch.nn.functional as F
 from lburst.model.fast import FastLBurstNet
 from lburst.model.lite import LiteNet
 from lburst.model.network import autocast_dtype
-from lburst.train.losses import cosim_loss, peaky_loss
+from lburst.train.losses import cosim_loss, peaky_loss, reliability_ap_loss
 
 
 def teacher_form(teacher: torch.nn.Module, precision: str = "fp32") -> FastLBurstNet:
@@ -47,6 +51,8 @@ def lite_distillation_step(
     patch: int = 16,
     distill_weight: float = 1.0,
     precision: str = "fp32",
+    ap_weight: float = 0.0,
+    generator: torch.Generator | None = None,
 ) -> dict[str, torch.Tensor]:
     """Losses of one batch for the light network: ``normalised`` holds bursts A then B
     ``(2B, 3N, H, W)``; ``batch`` their ``flow`` and ``mask``.  Returns ``loss``, ``cosim``,
@@ -68,7 +74,15 @@ def lite_distillation_step(
     cosim = cosim_loss(rep[:n], rep[n:], batch["flow"], batch["mask"], patch)
     peaky = (peaky_loss(rep[:n], patch) + peaky_loss(rep[n:], patch)) / 2
     loss = distill_weight * distill + cosim + peaky
+    extra = {}
+    if ap_weight > 0:
+        full = F.interpolate(desc, scale_factor=4.0, mode="bilinear", align_corners=False)
+        full = F.normalize(full[..., : size[0], : size[1]], dim=1)
+        _, ap = reliability_ap_loss(full[:n], full[n:], rel[:n].detach(), batch["flow"], batch["mask"], generator)
+        loss = loss + ap_weight * (1 - ap)
+        extra["ap"] = ap
     return {
+        **extra,
         "loss": loss,
         "cosim": cosim,
         "peaky": peaky,

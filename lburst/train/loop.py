@@ -494,6 +494,8 @@ def train(
                     cfg.patch,
                     cfg.distill_weight,
                     cfg.precision,
+                    ap_weight=cfg.ap_weight,
+                    generator=generator,
                 )
             else:
                 losses = training_step(
