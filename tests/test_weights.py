@@ -21,7 +21,7 @@ def _pair(size=(256, 192)):
     return [simulate_burst(im, 5, motion=(1.5, 0.5), rng=i) for i, im in enumerate((image, warped))]
 
 
-@pytest.mark.parametrize("name, frames", [("lburst-b5", 5), ("lburst-b1", 1)])
+@pytest.mark.parametrize("name, frames", [("lburst-b5", 5), ("lburst-b1", 1), ("lburst-b5-lite", 5)])
 def test_shipped_weights_match_under_a_known_homography(name, frames):
     model = LBurst.pretrained(name, device="cpu")
     assert model.frames == frames
@@ -33,6 +33,6 @@ def test_shipped_weights_match_under_a_known_homography(name, frames):
 
 
 def test_unknown_weights_name_lists_the_shipped_ones():
-    with pytest.raises(ValueError, match="lburst-b5, lburst-b1"):
+    with pytest.raises(ValueError, match="lburst-b5, lburst-b1, lburst-b5-lite"):
         weights_path("lburst-b3")
     assert all(weights_path(n).is_file() for n in NAMES)

@@ -133,23 +133,26 @@ def choose_runtime(
        not installed;
     3. ``torch-bf16`` where bf16 is native (unless ``exact``), else ``torch``.
 
-    Measured by ``scripts/runtime_speed.py`` on a 2-core AMD EPYC (Zen 4: avx512_bf16 and
-    avx512_vnni, no AMX) shared with a training job, so indicative: full 9-level extraction
-    of a 1024x768 5-frame burst by a partly trained light network (4000 keypoints).
+    Measured by ``scripts/runtime_speed.py --weights lburst/weights/lburst-b5-lite.pt`` on a
+    2-core AMD EPYC (Zen 4: avx512_bf16 and avx512_vnni, no AMX), nothing else running: full
+    9-level extraction of a 1024x768 5-frame burst (4000 keypoints), wall seconds, median of 5.
 
-    - One thread, CPU seconds: torch 1.67, torch bf16 1.31, ONNX Runtime 1.24, OpenVINO 1.38,
-      OpenVINO bf16 1.03, ONNX Runtime int8 0.93, OpenVINO int8 0.92 (about 0.6 s of each is
-      the extractor's own work: pyramid, maxima, descriptor sampling).
-    - Two threads, wall seconds (the training job on the same cores): torch 5.9, torch bf16
-      5.7, ONNX Runtime 3.7, OpenVINO 2.7, OpenVINO bf16 2.2, ONNX Runtime int8 3.3, OpenVINO
-      int8 2.7: OpenVINO suffers least from sharing the cores.
-    - Agreement with torch fp32: the fp32 runtimes within 1e-5 (same keypoints); bf16 raw maps
-      within 2e-2 and 99.5-99.6 % of the keypoints within 1 px; int8 only 94-96 %.
+    - Two threads: torch 0.593, torch bf16 0.385, ONNX Runtime 0.588, OpenVINO 0.621, OpenVINO
+      bf16 0.388, ONNX Runtime int8 0.468, OpenVINO int8 0.353 (lburst-b5's fast path 5.11).
+    - One thread: torch 0.929, torch bf16 0.622, ONNX Runtime 0.751, OpenVINO 0.868, OpenVINO
+      bf16 0.537, ONNX Runtime int8 0.495, OpenVINO int8 0.422.
+    - Agreement with torch fp32: the fp32 runtimes within 7e-6 (the same keypoints); bf16 raw
+      maps within 6e-2 and 99.6 % of the keypoints within 1 px; int8 92 % (below the 95 % this
+      project asks of a runtime, so never chosen).
+    - The same CPU shared with a training job (a partly trained network): two threads, torch
+      5.9, ONNX Runtime 3.7, OpenVINO 2.7, OpenVINO bf16 2.2 s: OpenVINO suffers least from
+      sharing the cores, hence its place in rule 2 on two threads or more.
 
     So OpenVINO bf16 is the fastest runtime that keeps the features wherever bf16 is native
-    (without it OpenVINO's bf16 is emulated, slower than fp32); among the exact runtimes ONNX
-    Runtime is the fastest on one thread and OpenVINO on two.  The int8 runtimes are never
-    chosen (no faster than OpenVINO bf16 here, and they move keypoints); ask for them by name.
+    (tied with torch bf16 on two idle threads; without native bf16 OpenVINO's bf16 is emulated,
+    slower than fp32); among the exact runtimes ONNX Runtime is the fastest on one thread, and
+    on two the three are within 5 % on idle cores while OpenVINO holds up best on busy ones.
+    The int8 runtimes are never chosen (they move keypoints); ask for them by name.
     No other CPU was measured: with AMX, or without AVX-512, the order may differ (run the
     script there).
     """

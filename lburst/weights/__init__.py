@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 HERE = Path(__file__).parent
-NAMES = ("lburst-b5", "lburst-b1")
+NAMES = ("lburst-b5", "lburst-b1", "lburst-b5-lite")
 
 
 def weights_path(name: str) -> Path:
-    """Path of the shipped checkpoint ``name`` (``'lburst-b5'`` or ``'lburst-b1'``)."""
+    """Path of the shipped checkpoint ``name`` (one of :data:`NAMES`)."""
     if name not in NAMES:
         raise ValueError(f"unknown weights {name!r}; shipped: {', '.join(NAMES)}")
     path = HERE / f"{name}.pt"
@@ -19,3 +19,11 @@ def weights_path(name: str) -> Path:
             "pass a checkpoint with --weights PATH or set LBURST_WEIGHTS"
         )
     return path
+
+
+def resolve_weights(spec: str | Path) -> Path:
+    """``spec`` as a checkpoint path: an existing file, or the name of shipped weights."""
+    path = Path(spec)
+    if path.is_file() or str(spec) not in NAMES:
+        return path
+    return weights_path(str(spec))
