@@ -93,3 +93,18 @@ def test_dng_recording_reconstructs(tmp_path):
     )
     assert result.registered == result.names and len(result.names) == 5
     assert result.metrics["ate_percent"] < 1.0
+
+
+def test_the_light_network_reconstructs_a_recording(video, tmp_path):
+    """`lburst reconstruct REC --method lburst-lite`: the shipped light weights on the CPU's own
+    runtime, from the video's keyframe bursts to a registered trajectory."""
+    result = reconstruct_scene(
+        video,
+        "lburst-lite",
+        tmp_path / "out",
+        progress=False,
+        extra=FAST,
+        recording=RecordingOptions(burst=5, every=16),
+    )
+    assert result.registered == result.names and len(result.names) == 7
+    assert result.metrics["ate_percent"] < 1.0
