@@ -13,14 +13,22 @@ import numpy as np
 
 from lburst.io import to_uint8
 
+#: pixels: the smallest side of a burst that lburst aligns, merges or extracts features from
+MIN_BURST_SIDE = 8
+
 
 def check_burst(burst: np.ndarray) -> np.ndarray:
-    """Return ``burst`` as an array after checking its shape ``(N, H, W, 3)``, N odd, and dtype."""
+    """Return ``burst`` as an array after checking its shape ``(N, H, W, 3)``, N odd, at least
+    :data:`MIN_BURST_SIDE` pixels a side, and its dtype."""
     burst = np.asarray(burst)
     if burst.ndim != 4 or burst.shape[-1] != 3:
         raise ValueError(f"expected a burst (N, H, W, 3), got shape {burst.shape}")
     if burst.shape[0] % 2 != 1:
         raise ValueError(f"a burst needs an odd number of frames, got {burst.shape[0]}")
+    if min(burst.shape[1:3]) < MIN_BURST_SIDE:
+        raise ValueError(
+            f"a {burst.shape[2]}x{burst.shape[1]} burst is too small (at least {MIN_BURST_SIDE} px a side)"
+        )
     if burst.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"a burst must be uint8 or uint16, got {burst.dtype}")
     return burst

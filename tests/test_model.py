@@ -194,6 +194,34 @@ def test_corrupt_and_truncated_checkpoints_are_clear_errors(tmp_path):
         load_checkpoint(mismatch)
 
 
+class _Payload:
+    """An object whose unpickling would run code (what weights_only=True refuses)."""
+
+    def __reduce__(self):
+        return (print, ("this must never run",))
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_a_checkpoint_with_non_finite_weights_is_refused_by_name(tmp_path, bad):
+    net = LBurstNet(NetConfig(frames=1))
+    state = net.state_dict()
+    state["ops.3.weight"][0, 0, 0, 0] = bad
+    path = tmp_path / "diverged.pt"
+    torch.save({"net": net.config.net_string(), "state_dict": state}, path)
+    with pytest.raises(CheckpointError, match=r"diverged.pt: 1 weight tensors hold NaN or inf.*'ops.3.weight'"):
+        load_checkpoint(path)
+
+
+def test_an_unsafe_pickle_is_refused_without_advising_weights_only_false(tmp_path, capsys):
+    path = tmp_path / "unsafe.pt"
+    torch.save({"net": "Fast_Quad_L2Net_ConfCFS(inchan=3)", "state_dict": {}, "x": _Payload()}, path)
+    with pytest.raises(CheckpointError) as info:
+        load_checkpoint(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: ") and "weights_only=True only" in message
+    assert "weights_only=False" not in message and "this must never run" not in capsys.readouterr().out
+
+
 def test_images_smaller_than_min_size_are_processed_at_their_own_size():
     torch.manual_seed(0)
     model = LBurst(LBurstNet(NetConfig(frames=1)).eval())

@@ -47,6 +47,17 @@ def _read_h(path: Path) -> np.ndarray:
         raise ValueError(f"{path}: not a 3x3 matrix of numbers ({exc})") from exc
     if h.shape != (3, 3):
         raise ValueError(f"{path}: expected a 3x3 matrix, got shape {h.shape}")
+    return check_homography(h, path)
+
+
+def check_homography(h: np.ndarray, where: str | Path) -> np.ndarray:
+    """``h`` if it is a usable ground-truth homography: finite and invertible (its smallest
+    singular value above 1e-9 of its largest); else ``ValueError`` naming ``where``."""
+    if not np.all(np.isfinite(h)):
+        raise ValueError(f"{where}: homography holds NaN or inf")
+    singular = np.linalg.svd(h, compute_uv=False)
+    if singular[0] == 0 or singular[-1] <= 1e-9 * singular[0]:
+        raise ValueError(f"{where}: homography is singular (rank {int(np.sum(singular > 1e-9 * singular[0]))})")
     return h
 
 

@@ -346,6 +346,9 @@ class LBurst:
                 burst = burst[n // 2 : n // 2 + 1]  # single-image net: the common frame
             else:
                 raise ValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
+        if min(burst.shape[1:3]) < MIN_SIDE:  # before any stage, the alignment included
+            h, w = burst.shape[1:3]
+            raise ValueError(f"a {w}x{h} image is too small for features (at least {MIN_SIDE} px a side)")
         if self.align and n == self.frames and burst.dtype in (np.uint8, np.uint16):
             burst = align_burst(burst)
         burst, scale = self._reduce(burst, cfg) if cfg is not None else (burst, 1.0)

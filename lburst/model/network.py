@@ -24,6 +24,7 @@ size and the last row/column can never hold a keypoint, as in the published code
 
 from __future__ import annotations
 
+import pickle
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -266,7 +267,15 @@ def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tup
         raise CheckpointError(f"{path}: checkpoint file not found")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # truncated zip, not a torch file, unsafe pickle...
+    except pickle.UnpicklingError as exc:
+        if "weights only load failed" not in str(exc).lower():
+            raise CheckpointError(f"{path}: not a readable checkpoint (UnpicklingError: {exc})") from exc
+        # torch's message advises weights_only=False: lburst never does that
+        raise CheckpointError(
+            f"{path}: not a checkpoint lburst loads: it holds Python objects beyond tensors, and lburst loads "
+            "checkpoints with weights_only=True only (it never runs code from a file)"
+        ) from exc
+    except Exception as exc:  # truncated zip, not a torch file...
         raise CheckpointError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from exc
     if not isinstance(ckpt, dict) or "state_dict" not in ckpt or "net" not in ckpt:
         raise CheckpointError(f"{path}: expected a dict with 'net' and 'state_dict'")
@@ -279,6 +288,11 @@ def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tup
         net.load_state_dict(state, strict=True)
     except RuntimeError as exc:
         raise CheckpointError(f"{path}: weights do not fit {ckpt['net']}: {exc}") from exc
+    broken = [k for k, v in net.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()]
+    if broken:
+        raise CheckpointError(
+            f"{path}: {len(broken)} weight tensors hold NaN or inf (a diverged run?), first {broken[0]!r}"
+        )
     net.eval().to(device)
     extra = {k: v for k, v in ckpt.items() if k != "state_dict"}
     return net, extra
