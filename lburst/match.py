@@ -6,6 +6,23 @@ import numpy as np
 import torch
 
 
+def check_descriptors(desc_a: np.ndarray, desc_b: np.ndarray) -> None:
+    """``ValueError`` unless both are (K, D) arrays of one dtype and one width D, and float
+    descriptors are finite (a NaN descriptor would match whatever comes first)."""
+    for name, d in (("first", desc_a), ("second", desc_b)):
+        if not isinstance(d, np.ndarray) or d.ndim != 2:
+            raise ValueError(f"{name} descriptors must be a (K, D) array, got {getattr(d, 'shape', type(d).__name__)}")
+    if desc_a.dtype != desc_b.dtype:
+        raise ValueError(f"descriptor types differ: {desc_a.dtype} vs {desc_b.dtype}")
+    if desc_a.shape[1] != desc_b.shape[1]:
+        raise ValueError(f"descriptor sizes differ: {desc_a.shape[1]} vs {desc_b.shape[1]}")
+    if np.issubdtype(desc_a.dtype, np.floating):
+        for name, d in (("first", desc_a), ("second", desc_b)):
+            bad = int((~np.isfinite(d)).any(1).sum())
+            if bad:
+                raise ValueError(f"{bad} of the {name} set's {len(d)} descriptors hold NaN or inf")
+
+
 def _distances(a: torch.Tensor, b: torch.Tensor, binary: bool) -> torch.Tensor:
     if binary:  # packed bits: Hamming distance through unpacked 0/1 vectors
         bits = torch.tensor([1 << i for i in range(8)], dtype=torch.uint8, device=a.device)
@@ -23,8 +40,7 @@ def mutual_nearest_neighbours(
     ``desc_a`` (Ka, D) and ``desc_b`` (Kb, D): float32 (L2) or uint8 packed bits (Hamming).
     Optionally drop pairs farther apart than ``max_distance``.
     """
-    if desc_a.dtype != desc_b.dtype:
-        raise ValueError(f"descriptor types differ: {desc_a.dtype} vs {desc_b.dtype}")
+    check_descriptors(desc_a, desc_b)
     if len(desc_a) == 0 or len(desc_b) == 0:
         return np.zeros((0, 2), np.int64)
     binary = desc_a.dtype == np.uint8

@@ -67,6 +67,8 @@ def available() -> list[MatcherInfo]:
 
 def create(spec: str = DEFAULT) -> Matcher:
     """The matcher of ``spec`` (``NAME[,KEY=VALUE...]``)."""
+    if not isinstance(spec, str):
+        raise ValueError(f"a matcher spec is a string such as 'mnn' or 'ratio,ratio=0.8', got {spec!r}")
     name, *pairs = spec.split(",")
     name = name.strip()
     if name not in _MATCHERS:
@@ -142,9 +144,10 @@ class RatioTest:
     def __call__(self, a: Features, b: Features) -> np.ndarray:
         import torch
 
-        from lburst.match import _distances
+        from lburst.match import _distances, check_descriptors
 
         da, db = a["descriptors"], b["descriptors"]
+        check_descriptors(da, db)
         if len(da) == 0 or len(db) == 0:
             return np.zeros((0, 2), np.int64)
         ta, tb = _tensors(da, db, self.options.device)

@@ -149,6 +149,8 @@ def method_slug(spec: str) -> str:
 
 def parse_spec(spec: str) -> Spec:
     """Parse ``NAME[:ARG][,KEY=VALUE...]`` or ``WRAPPER[,KEY=VALUE...]+SPEC`` (module docstring)."""
+    if not isinstance(spec, str):
+        raise ValueError(f"a method spec is a string such as 'lburst' or 'merge+sift', got {spec!r}")
     _load_providers()
     head, plus, rest = spec.partition("+")
     if plus:
