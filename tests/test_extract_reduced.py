@@ -30,3 +30,17 @@ def test_frames_resized_first_give_the_features_of_the_full_resolution_input(dty
     np.testing.assert_allclose(got["keypoints"], expected["keypoints"], atol=1e-4)
     np.testing.assert_allclose(got["descriptors"], expected["descriptors"], atol=1e-4)
     np.testing.assert_array_equal(got["scales"], expected["scales"])
+
+
+def test_dense_refuses_a_burst_whose_maps_pass_half_the_memory(monkeypatch):
+    from lburst.model import extractor
+
+    torch.manual_seed(0)
+    model = LBurst(LiteNet(LiteConfig(frames=3, dim=16, fine=8, coarse=16, dilations=(1,))), "cpu")
+    burst = np.zeros((3, 300, 400, 3), np.uint8)
+    assert extractor.dense_bytes(3000, 4000) > 17 * 2**30  # a 4000x3000 burst at D = 128
+    monkeypatch.setattr(extractor, "memory_limit_bytes", lambda: extractor.dense_bytes(300, 400, 16) - 1)
+    with pytest.raises(ValueError, match=r"dense maps of a 400x300 burst need about .* GiB.*use extract\(\)"):
+        model.dense(burst)
+    monkeypatch.setattr(extractor, "memory_limit_bytes", lambda: extractor.dense_bytes(300, 400, 16))
+    assert model.dense(burst)["descriptors"].shape == (300, 400, 16)

@@ -12,6 +12,7 @@ a level resized to ``w x h`` back as ``x * W / w``, which is off by
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
@@ -166,6 +167,20 @@ def _kth_best(scores: list[torch.Tensor], k: int | None) -> float:
     return best
 
 
+def dense_bytes(height: int, width: int, dim: int = 128) -> int:
+    """Bytes :meth:`LBurst.dense` holds at its peak for an ``height x width`` burst: the
+    upsampled, the normalised and the returned ``(H, W, D)`` float32 descriptors."""
+    return 3 * 4 * height * width * dim
+
+
+def memory_limit_bytes() -> int | None:
+    """Half of the machine's physical memory (``None`` where the OS does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
 class LBurst:
     """Feature extractor for robotic bursts (or single images with a 1-frame net).
 
@@ -237,6 +252,11 @@ class LBurst:
         if self.descriptor_whitening is not None:
             d = d @ self.descriptor_whitening.T
         return F.normalize(d, dim=-1).movedim(-1, dim)
+
+    @property
+    def descriptor_dim(self) -> int:
+        """D, the descriptors' size (128 for the shipped weights)."""
+        return self.net.config.dim if self.net is not None and hasattr(self.net.config, "dim") else 128
 
     @property
     def fast_net(self) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
@@ -394,8 +414,17 @@ class LBurst:
         """Dense outputs at the input's resolution (``whiten``: as :class:`MultiScaleConfig`).
 
         Returns ``descriptors`` (H, W, D), ``repeatability`` (H, W) and
-        ``reliability`` (H, W), float32 NumPy arrays.
+        ``reliability`` (H, W), float32 NumPy arrays.  ``ValueError`` before any work when
+        they would need more than half of the machine's memory (:func:`dense_bytes`; a
+        4000x3000 burst needs about 18 GB): use :meth:`extract`, or a smaller burst.
         """
+        height, width = self._full_size(burst)
+        need, limit = dense_bytes(height, width, self.descriptor_dim), memory_limit_bytes()
+        if limit is not None and need > limit:
+            raise ValueError(
+                f"dense maps of a {width}x{height} burst need about {need / 2**30:.1f} GiB, more than half of "
+                f"this machine's memory ({limit / 2**30:.1f} GiB): use extract(), or resize the burst"
+            )
         x, _ = self._input(burst)
         rep, rel, half = self.fast_net(x)
         stride = descriptor_stride(half.shape[-1], x.shape[-1])
