@@ -35,20 +35,12 @@ import cv2
 import numpy as np
 
 from lburst.align import METHODS, align_burst, estimate_shifts
+from lburst.model.precision import cpu_name
 from lburst.noise import GaussianNoise, noise_from_spec
+from lburst.paths import shared_dir
 from lburst.simulate import simulate_burst
 
-SHARED = Path(os.environ.get("LBURST_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+SHARED = shared_dir()
 
 
 def load_photos(count: int, size: tuple[int, int], seed: int) -> list[tuple[str, np.ndarray]]:
@@ -120,7 +112,7 @@ def main() -> None:
     print(
         f"{len(bursts)} bursts {width}x{height}x{args.frames} {args.dtype} ({len(photos)} photos x "
         f"{args.motions} motions x {len(noises)} noise levels), {args.threads} OpenCV thread(s), "
-        f"CPU {cpu_model()}",
+        f"CPU {cpu_name()}",
         flush=True,
     )
 
@@ -185,7 +177,7 @@ def main() -> None:
         config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}
         config["photos_used"] = [name for name, _ in photos]
         env = {
-            "cpu": cpu_model(),
+            "cpu": cpu_name(),
             "opencv": cv2.__version__,
             "numpy": np.__version__,
             "python": platform.python_version(),

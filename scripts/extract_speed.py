@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import resource
 import statistics
 import subprocess
@@ -36,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+from lburst.model.precision import cpu_name
 
 PATHS = ("plain", "fast", "bf16", "onnx", "align", "default", "lite")
 #: what a user runs: shipped weights, every default, alignment included
@@ -106,7 +107,7 @@ def run_child(path: str, args: argparse.Namespace) -> dict:
         agreement = None
     result = {
         "path": path,
-        "runtime": getattr(model, "runtime", None) if path != "onnx" else "onnxruntime",
+        "runtime": None if path == "align" else "onnxruntime" if path == "onnx" else getattr(model, "runtime", None),
         "median_s": statistics.median(times),
         "times_s": times,
         "keypoints": count,
@@ -117,16 +118,6 @@ def run_child(path: str, args: argparse.Namespace) -> dict:
     if device.startswith("cuda"):
         result["peak_cuda_mb"] = torch.cuda.max_memory_allocated() / 2**20
     return result
-
-
-def _cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "cpu"
 
 
 def _cpu_flags() -> str:
@@ -190,7 +181,7 @@ def main() -> int:
         shutil.rmtree(Path(extra[1]).parent, ignore_errors=True)
     base = next((r["median_s"] for r in results if r["path"] == "plain"), None)
     default = next((r["median_s"] for r in results if r["path"] == "default"), None)
-    device = torch.cuda.get_device_name() if args.device.startswith("cuda") else _cpu_name()
+    device = torch.cuda.get_device_name() if args.device.startswith("cuda") else cpu_name()
     flags = _cpu_flags()
     print(
         f"\n5-frame burst {args.width}x{args.height}, {args.device} ({device}; native bf16: {flags}), "

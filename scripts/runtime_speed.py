@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
 import sys
 import tempfile
@@ -35,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+from lburst.model.precision import cpu_name
 
 RUNTIMES = ("torch", "torch-bf16", "onnxruntime", "onnxruntime-int8", "openvino", "openvino-bf16", "openvino-int8")
 REFERENCE = "fast-quad-l2 (torch)"
@@ -50,16 +51,6 @@ def _make_burst(size: tuple[int, int], frames: int) -> np.ndarray:
 
     photo = cv2.resize(skimage.data.astronaut(), (size[1], size[0]), interpolation=cv2.INTER_LINEAR)
     return simulate_burst(photo, frames, (1.5, 0.5), GaussianNoise(50.0), rng=0)
-
-
-def _cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "cpu"
 
 
 def _cpu_features() -> str:
@@ -266,7 +257,7 @@ def main() -> int:
     results = []
     for threads in args.threads:
         results += run(args, threads)
-    print(f"\nCPU: {_cpu_name()} ({_cpu_features()}); torch {torch.__version__}")
+    print(f"\nCPU: {cpu_name()} ({_cpu_features()}); torch {torch.__version__}")
     for key in ("calibration_s", "export_s", "quantize_onnx_s", "convert_openvino_s", "quantize_openvino_s"):
         if key in args.shared:
             print(f"{key}: {args.shared[key]:.1f}")
@@ -283,7 +274,7 @@ def main() -> int:
         args.out.write_text(
             json.dumps(
                 {
-                    "cpu": _cpu_name(),
+                    "cpu": cpu_name(),
                     "cpu_features": _cpu_features(),
                     "torch": torch.__version__,
                     "versions": versions,

@@ -109,7 +109,8 @@ def photos(tmp_path_factory):
     return folder
 
 
-def test_distillation_pulls_the_student_towards_the_teacher(photos):
+def _student_and_teacher(photos):
+    """Two pairs of 3-frame bursts, their normalised input, a random teacher, a small student and its optimiser."""
     ds = PairDataset(list_photos([photos]), TINY, seed=0)
     items = [ds[i] for i in range(2)]
     batch = {k: torch.stack([it[k] for it in items]) for k in items[0]}
@@ -118,7 +119,11 @@ def test_distillation_pulls_the_student_towards_the_teacher(photos):
     teacher = teacher_form(LBurstNet(NetConfig(frames=3)).eval())
     torch.manual_seed(0)
     net = LiteNet(LiteConfig(frames=3, fine=16, coarse=32)).train()
-    opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+    return batch, x, teacher, net, torch.optim.Adam(net.parameters(), lr=3e-3)
+
+
+def test_distillation_pulls_the_student_towards_the_teacher(photos):
+    batch, x, teacher, net, opt = _student_and_teacher(photos)
     parts = []
     for _ in range(25):
         losses = lite_distillation_step(net, teacher, batch, x, patch=8)
@@ -150,15 +155,7 @@ def test_a_light_run_with_a_teacher_trains_and_resumes(photos, tmp_path):
 
 
 def test_the_ap_term_raises_the_students_cross_view_ap(photos):
-    ds = PairDataset(list_photos([photos]), TINY, seed=0)
-    items = [ds[i] for i in range(2)]
-    batch = {k: torch.stack([it[k] for it in items]) for k in items[0]}
-    x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
-    torch.manual_seed(1)
-    teacher = teacher_form(LBurstNet(NetConfig(frames=3)).eval())
-    torch.manual_seed(0)
-    net = LiteNet(LiteConfig(frames=3, fine=16, coarse=32)).train()
-    opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+    batch, x, teacher, net, opt = _student_and_teacher(photos)
     aps = []
     for step in range(25):
         generator = torch.Generator().manual_seed(step)

@@ -47,3 +47,16 @@ def check_precision(precision: str, device: torch.device | str) -> None:
             RuntimeWarning,
             stacklevel=2,
         )
+
+
+def cpu_name() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), for the tables of the speed scripts."""
+    import platform
+
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "cpu"
