@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from lburst.io import BurstError
+from lburst.numbers import check_real
 
 RAW_SUFFIXES = (".dng",)
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
@@ -132,8 +133,8 @@ class Normalisation:
                 object.__setattr__(self, "gain", float(self.gain))
             except ValueError:
                 raise ValueError(f"gain must be 'auto', 'none' or a number, got {self.gain!r}") from None
-        if not isinstance(self.gain, str) and not self.gain > 0:
-            raise ValueError(f"gain must be positive, got {self.gain}")
+        if not isinstance(self.gain, str):
+            check_real(self.gain, "raw gain", 0, low_open=True)
         if self.curve not in ("srgb", "linear"):
             raise ValueError(f"curve must be 'srgb' or 'linear', got {self.curve!r}")
         if not 0 < self.percentile <= 100 or not 0 < self.target <= 1 or self.max_gain < 1:

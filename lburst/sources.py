@@ -44,6 +44,7 @@ import numpy as np
 
 from lburst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_key, read_image
 from lburst.keyframes import MotionGate, MotionTracker, thumbnail
+from lburst.numbers import check_integer, check_real
 from lburst.raw import RAW_SUFFIXES, Normalisation, normalise, read_dng
 
 DEFAULT_FPS = 30.0
@@ -72,12 +73,15 @@ class RecordingOptions:
     motion: MotionGate | None = None
 
     def __post_init__(self) -> None:
-        if self.burst < 1 or self.burst % 2 == 0:
+        check_integer(self.burst, "--burst", 1, 99)
+        if self.burst % 2 == 0:
             raise ValueError(f"--burst must be odd and positive (the middle frame is the keyframe), got {self.burst}")
-        if self.every < 1:
-            raise ValueError(f"--every must be at least 1, got {self.every}")
-        if self.start < 0 or (self.fps is not None and self.fps <= 0):
-            raise ValueError("start must be >= 0 and fps positive")
+        check_integer(self.every, "--every", 1)
+        check_integer(self.start, "--start", 0)
+        if self.fps is not None:
+            check_real(self.fps, "--fps", 0, 10000, low_open=True)
+        if self.max_frames is not None:
+            check_integer(self.max_frames, "max_frames", 1)
 
     def signature(self) -> str:
         """What changes the bursts (for caches): burst, every or motion, start, fps, normalisation."""

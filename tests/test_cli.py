@@ -94,7 +94,7 @@ def test_a_bad_option_value_is_one_line(tmp_path):
     burst = tmp_path / "b0"
     save_burst(np.zeros((1, 32, 32, 3), np.uint8), burst)
     proc = _cli("extract", burst, "--out", tmp_path / "out", "--top-k", "-1")
-    assert proc.returncode != 0 and "Traceback" not in proc.stderr and "top_k" in proc.stderr
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr and "--top-k" in proc.stderr
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="CUDA is here")

@@ -7,37 +7,38 @@ import sys
 from pathlib import Path
 
 from lburst.bench.homography import MotionRange, markdown, run_homography_benchmark
+from lburst.cli.numbers import integer, real
 from lburst.cli.options import add_matcher_argument
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", type=Path, help="folder of sequence folders (Oxford or HPatches layout)")
     p.add_argument("--methods", nargs="+", default=["lburst", "sift", "orb", "merge+sift"])
-    p.add_argument("--sigma", type=float, nargs="+", default=[25, 50, 100], help="Gaussian noise std levels (0..255)")
+    p.add_argument("--sigma", type=real(0), nargs="+", default=[25, 50, 100], help="Gaussian noise std levels (0..255)")
     p.add_argument("--noise", nargs="*", default=[], help="extra noise levels as lburst.noise specs")
-    p.add_argument("--max-side", type=int)
-    p.add_argument("--top-k", type=int, default=5000)
+    p.add_argument("--max-side", type=integer(8))
+    p.add_argument("--top-k", type=integer(1), default=5000)
     p.add_argument("--out", type=Path, default=Path("outputs/homography"))
     p.add_argument(
         "--burst-rotation",
-        type=float,
+        type=real(0, 180),
         default=0.0,
         metavar="DEG",
         help="largest in-burst rotation per frame (degrees; 0: translation only)",
     )
     p.add_argument(
-        "--burst-zoom", type=float, default=0.0, metavar="Z", help="largest in-burst zoom per frame (0.01: 1%%)"
+        "--burst-zoom", type=real(0, 0.5), default=0.0, metavar="Z", help="largest in-burst zoom per frame (0.01: 1%%)"
     )
     p.add_argument(
         "--burst-flow",
-        type=float,
+        type=real(0),
         default=0.0,
         metavar="PX",
         help="largest std of the smooth non-uniform in-burst flow per frame (pixels)",
     )
     p.add_argument(
         "--every",
-        type=int,
+        type=integer(1),
         default=1,
         metavar="K",
         help="use every K-th sequence in name order (the first, the K+1-th, ...): a quicker, fixed subset",

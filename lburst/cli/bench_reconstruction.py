@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from lburst.bench.reconstruction import run_benchmark
+from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
 from lburst.io import atomic_path
 
@@ -15,12 +16,12 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--methods", nargs="+", default=["sift", "merge+sift", "lburst"], help="method specs")
     parser.add_argument("--out", required=True, help="output folder: OUT/<method>/<scene>/, table.md, results.json")
     parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto")
-    parser.add_argument("--overlap", type=int, default=10)
+    parser.add_argument("--overlap", type=integer(1), default=10)
     parser.add_argument("--fallback-exhaustive", action="store_true")
     parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
     parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
     parser.add_argument("--single-camera", action="store_true", help="one camera for all images of a scene")
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--threads", type=integer(1, 1024), default=2)
     add_matcher_argument(parser)
     parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")
 

@@ -8,6 +8,7 @@ import argparse
 import logging
 import sys
 
+from lburst.cli.numbers import integer
 from lburst.process import die_with_parent
 from lburst.sfm.colmap import run_job
 
@@ -15,7 +16,7 @@ from lburst.sfm.colmap import run_job
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Run one COLMAP job folder (internal to lburst reconstruct).")
     parser.add_argument("job_dir")
-    parser.add_argument("--parent", type=int, help="die when this process does (the lburst parent)")
+    parser.add_argument("--parent", type=integer(1), help="die when this process does (the lburst parent)")
     args = parser.parse_args(argv)
     if args.parent:
         die_with_parent(args.parent)

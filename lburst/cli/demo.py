@@ -7,6 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
 from lburst.demo import lburst_spec, run_demo
 
@@ -15,9 +16,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("outputs/demo"), help="report folder")
     p.add_argument("--weights", help="LBurst checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
     p.add_argument("--noise", default="lowlight:moonless", help="noise of the flight (lburst.noise spec)")
-    p.add_argument("--bursts", type=int, default=15)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--overlap", type=int, default=4, help="match each burst with this many next ones")
+    p.add_argument("--bursts", type=integer(2), default=15)
+    p.add_argument("--seed", type=integer(0), default=0)
+    p.add_argument("--overlap", type=integer(1), default=4, help="match each burst with this many next ones")
     p.add_argument("--methods", nargs="+", help="methods to compare (default: lburst and sift)")
     add_matcher_argument(p)
 

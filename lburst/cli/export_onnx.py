@@ -8,6 +8,7 @@ from pathlib import Path
 
 import torch
 
+from lburst.cli.numbers import integer
 from lburst.model.network import CheckpointError, load_checkpoint
 from lburst.model.onnx import OnnxRunner, export_onnx
 from lburst.model.runtimes import inference_form
@@ -16,7 +17,7 @@ from lburst.model.runtimes import inference_form
 def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("checkpoint", help="checkpoint to export (lburst or published layout)")
     p.add_argument("--out", type=Path, required=True, help="ONNX file to write")
-    p.add_argument("--opset", type=int, default=18)
+    p.add_argument("--opset", type=integer(11, 30), default=18)
     p.add_argument("--check", action="store_true", help="compare ONNX Runtime with torch on a random burst")
 
 

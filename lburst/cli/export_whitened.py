@@ -7,6 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lburst.cli.numbers import integer, real
 from lburst.model.network import CheckpointError
 from lburst.paths import shared_dir
 
@@ -20,9 +21,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         type=Path,
         help="photo folders (default: $LBURST_SHARED/data/train512); the validation tenth is left out",
     )
-    p.add_argument("--count", type=int, default=80, help="photos to sample, one synthetic burst each")
-    p.add_argument("--power", type=float, default=1.0, help="1: full whitening, 0: centring only")
-    p.add_argument("--seed", type=int, default=0, help="seed of the photo sample, shifts and noise")
+    p.add_argument("--count", type=integer(2), default=80, help="photos to sample, one synthetic burst each")
+    p.add_argument("--power", type=real(0, 1), default=1.0, help="1: full whitening, 0: centring only")
+    p.add_argument("--seed", type=integer(0), default=0, help="seed of the photo sample, shifts and noise")
     p.set_defaults(_default_photos=shared_dir() / "data" / "train512")
 
 

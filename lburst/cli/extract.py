@@ -20,6 +20,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from lburst import store
+from lburst.cli.numbers import integer
 from lburst.cli.options import add_recording_arguments, recording_options
 from lburst.io import BurstError, atomic_path, load_burst, read_features_npz, write_features_h5
 from lburst.methods import accepts, create
@@ -68,7 +69,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         choices=["temporal", "published"],
         help="frame order for burst networks ('published' for the published LBurst weights)",
     )
-    p.add_argument("--top-k", type=int, default=4000, help="keypoints per burst (learned methods)")
+    p.add_argument("--top-k", type=integer(0), default=4000, help="keypoints per burst (learned methods)")
     p.add_argument("--h5", action="store_true", help="also write an hloc-style features.h5 in --out")
     p.add_argument("--overwrite", action="store_true", help="recompute bursts that are already done")
     p.add_argument("--device", help="cpu or cuda (default: cuda if available)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from lburst.cli.numbers import integer, real
 from lburst.keyframes import MotionGate
 from lburst.matching import DEFAULT, available, create
 from lburst.sources import DEFAULT_FPS, Normalisation, RecordingOptions
@@ -16,21 +17,23 @@ def add_recording_arguments(p) -> None:
     g.add_argument(
         "--burst",
         dest="burst_frames",
-        type=int,
+        type=integer(1, 99),
         default=5,
         help="frames per burst, odd, centred on each keyframe (default 5)",
     )
-    g.add_argument("--every", type=int, help="a keyframe every this many frames (default 10)")
+    g.add_argument("--every", type=integer(1), help="a keyframe every this many frames (default 10)")
     g.add_argument(
         "--motion",
-        type=float,
+        type=real(0, 1, low_open=True),
         metavar="F",
         help="instead of --every: a keyframe once the view has moved F of the image width since the last one "
         "(median pixel shift of burst-averaged thumbnails registered by ECC; 0.05-0.2)",
     )
-    g.add_argument("--start", type=int, default=0, help="frame index of the first keyframe (default 0)")
+    g.add_argument("--start", type=integer(0), default=0, help="frame index of the first keyframe (default 0)")
     g.add_argument(
-        "--fps", type=float, help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})"
+        "--fps",
+        type=real(0, 10000, low_open=True),
+        help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})",
     )
     g.add_argument(
         "--raw-gain",

@@ -7,6 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lburst.cli.numbers import integer, real
 from lburst.cli.options import add_matcher_argument, add_recording_arguments, recording_options
 from lburst.sfm.reconstruct import (
     AUTO_EXHAUSTIVE_MAX,
@@ -40,26 +41,26 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--overlap",
-        type=int,
+        type=integer(1),
         help=f"sequential pairs: neighbours on each side (default {SCENE_OVERLAP} for a scene, "
         f"{RECORDING_OVERLAP} for a recording)",
     )
     parser.add_argument(
         "--near",
-        type=int,
+        type=integer(0),
         help="pairs farther apart than this (retrieval candidates, the farthest sequential ones) are kept "
         "only when their inlier count passes the loop test "
         f"(default {RECORDING_NEAR} for a recording, no test for a scene)",
     )
     parser.add_argument(
         "--loop-fraction",
-        type=float,
+        type=real(0, 1),
         default=LOOP_FRACTION,
         help="loop test: fewest inliers as a fraction of the adjacent pairs' median",
     )
     parser.add_argument(
         "--abs-pose-inliers",
-        type=int,
+        type=integer(1),
         help=f"fewest 2D-3D inliers to register an image (default {RECORDING_ABS_POSE_INLIERS} for a "
         "recording, 30 for a scene)",
     )
@@ -82,17 +83,17 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="one camera for all images (when their priors agree) instead of one per image",
     )
     parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--threads", type=integer(1, 1024), default=2)
     parser.add_argument(
         "--mapper-threads",
-        type=int,
+        type=integer(1, 1024),
         help="threads of the mapper (default: 1 for a recording, which makes it repeatable; --threads for a scene)",
     )
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=integer(0), default=0)
     add_matcher_argument(parser)
     parser.add_argument(
         "--retrieval",
-        type=int,
+        type=integer(1),
         help="sequential pairs: also match each image with its N most similar images farther apart "
         f"(loop closure; default {RECORDING_RETRIEVAL} for a recording, 0 for a scene)",
     )

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from lburst.cli.extract import burst_name
+from lburst.cli.numbers import integer
 from lburst.io import BurstError, load_burst
 from lburst.model.extractor import LBurst
 from lburst.model.network import CheckpointError
@@ -20,11 +21,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="burst folder, image or video, or a recording (video, or a folder of "
         "frames or DNGs with meta.json): then the burst centred on --frame",
     )
-    p.add_argument("--frame", type=int, help="recording: the keyframe's frame index (a video without it is one burst)")
-    p.add_argument("--frames", type=int, default=5, help="recording: frames in the burst (odd, default 5)")
+    p.add_argument(
+        "--frame", type=integer(0), help="recording: the keyframe's frame index (a video without it is one burst)"
+    )
+    p.add_argument("--frames", type=integer(1, 99), default=5, help="recording: frames in the burst (odd, default 5)")
     p.add_argument("--weights", help="checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
     p.add_argument("--frame-order", choices=["temporal", "published"], default="temporal")
-    p.add_argument("--top-k", type=int, default=4000)
+    p.add_argument("--top-k", type=integer(0), default=4000)
     p.add_argument("--out", type=Path, help="PNG path (default: <burst>_keypoints.png here)")
     p.add_argument("--device")
 

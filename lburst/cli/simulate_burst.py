@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lburst.cli.numbers import integer, real
 from lburst.io import BurstError, read_image, save_burst
 from lburst.noise import noise_from_spec
 from lburst.simulate import simulate_burst
@@ -21,10 +22,10 @@ def default_photo():
 def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("image", nargs="?", type=Path, help="photo (default: scikit-image's astronaut)")
     p.add_argument("--out", type=Path, required=True, help="folder for frame_000.png ...")
-    p.add_argument("--frames", type=int, default=5)
+    p.add_argument("--frames", type=integer(1, 99), default=5)
     p.add_argument(
         "--motion",
-        type=float,
+        type=real(-1000, 1000),
         nargs=2,
         default=(2.0, 1.0),
         metavar=("DX", "DY"),
@@ -33,7 +34,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--noise", default="gaussian:50", help="none, gaussian:STD, gaussian-var:V, lowlight:PHOTONS|night|..."
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=integer(0), default=0)
 
 
 def main(args: argparse.Namespace) -> int:

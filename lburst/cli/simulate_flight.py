@@ -7,6 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lburst.cli.numbers import integer, real
 from lburst.scenes import flight_recording as recording
 from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
 
@@ -31,17 +32,21 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="also (or only) write the flight as a folder of 12-bit Bayer DNG frames "
         "(needs --noise lowlight:...), with gt.txt and meta.json inside",
     )
-    p.add_argument("--crf", type=int, default=16, help="H.264 quality of --video (lower: better; default 16)")
-    p.add_argument("--turn", type=float, default=default.turn_deg, help="heading change over the flight, degrees")
+    p.add_argument(
+        "--crf", type=integer(0, 51), default=16, help="H.264 quality of --video (lower: better; default 16)"
+    )
+    p.add_argument(
+        "--turn", type=real(-3600, 3600), default=default.turn_deg, help="heading change over the flight, degrees"
+    )
     p.add_argument("--loop", action="store_true", help="fly a loop that passes over its start again (--turn 380)")
-    p.add_argument("--bursts", type=int, default=default.n_bursts, help="number of bursts")
-    p.add_argument("--frames", type=int, default=default.frames_per_burst, help="frames per burst (odd)")
+    p.add_argument("--bursts", type=integer(2), default=default.n_bursts, help="number of bursts")
+    p.add_argument("--frames", type=integer(1, 99), default=default.frames_per_burst, help="frames per burst (odd)")
     p.add_argument("--size", default=f"{default.width}x{default.height}", help="WIDTHxHEIGHT")
     p.add_argument("--noise", default=default.noise, help="noise spec, e.g. gaussian:50 (default: none)")
-    p.add_argument("--exposure", type=float, default=default.exposure, help="gain before noise")
+    p.add_argument("--exposure", type=real(0, low_open=True), default=default.exposure, help="gain before noise")
     p.add_argument("--daylight", action="store_true", help="no night lighting")
-    p.add_argument("--supersample", type=int, default=default.supersample, help="anti-aliasing factor")
-    p.add_argument("--seed", type=int, default=default.seed)
+    p.add_argument("--supersample", type=integer(1, 16), default=default.supersample, help="anti-aliasing factor")
+    p.add_argument("--seed", type=integer(0), default=default.seed)
 
 
 def main(args: argparse.Namespace) -> int:

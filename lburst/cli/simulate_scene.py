@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from lburst.cli.numbers import integer, real
 from lburst.scenes.photo_scene import REFERENCE_SOURCE, simulate_scene
 from lburst.sfm.scene import SceneError, list_scene
 
@@ -13,10 +14,12 @@ from lburst.sfm.scene import SceneError, list_scene
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("photos", help="folder of photos of one scene (natural order = trajectory order)")
     parser.add_argument("--out", required=True, help="scene folder to write")
-    parser.add_argument("--frames", type=int, default=5, help="frames per burst (odd)")
-    parser.add_argument("--motion-px", type=float, default=2.0, help="largest in-burst motion, pixels per frame")
+    parser.add_argument("--frames", type=integer(1, 99), default=5, help="frames per burst (odd)")
+    parser.add_argument(
+        "--motion-px", type=real(0, 1000), default=2.0, help="largest in-burst motion, pixels per frame"
+    )
     parser.add_argument("--noise", default="gaussian:50", help="noise spec (lburst.noise), or 'none'")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=integer(0), default=0)
     parser.add_argument("--no-reference", action="store_true", help="skip the clean SIFT reconstruction")
     parser.add_argument(
         "--reference-single-camera",
@@ -33,7 +36,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--reference-threads",
-        type=int,
+        type=integer(1, 1024),
         default=2,
         help="COLMAP threads for the reference reconstruction (its result depends on them)",
     )

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from lburst.bench.validation import make_validation_sequences
+from lburst.cli.numbers import integer
 from lburst.paths import shared_dir
 
 
@@ -25,7 +26,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         default="validation",
         help="which photos: the held-out tenth (never trained on) or all",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of every random draw")
+    p.add_argument("--seed", type=integer(0), default=0, help="seed of every random draw")
     p.set_defaults(_default_photos=shared_dir() / "data" / "train512")
 
 

@@ -7,6 +7,7 @@ import argparse
 import os
 from dataclasses import fields, replace
 
+from lburst.cli.numbers import integer, real
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.paths import shared_dir
 from lburst.train.loop import PRESETS, TrainConfig, check_resume_options, saved_run_length, train
@@ -22,20 +23,20 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", required=True, help="run folder (checkpoints, log.csv)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="cpu")
-    p.add_argument("--frames", type=int, help="burst length N (1 = single-image network)")
-    p.add_argument("--steps", type=int)
-    p.add_argument("--batch-size", type=int)
-    p.add_argument("--time-budget", type=float, help="stop (resumably) after this many seconds")
-    p.add_argument("--workers", type=int)
-    p.add_argument("--threads", type=int, help="torch threads")
+    p.add_argument("--frames", type=integer(1, 99), help="burst length N (1 = single-image network)")
+    p.add_argument("--steps", type=integer(1))
+    p.add_argument("--batch-size", type=integer(1, 512))
+    p.add_argument("--time-budget", type=real(0, low_open=True), help="stop (resumably) after this many seconds")
+    p.add_argument("--workers", type=integer(0, 64))
+    p.add_argument("--threads", type=integer(1, 1024), help="torch threads")
     p.add_argument(
         "--checkpoint-every",
-        type=float,
+        type=real(0, low_open=True),
         metavar="SECONDS",
         help="write the resumable last.pt every this many seconds (presets: 300, gpu 60)",
     )
     p.add_argument("--tensorboard", action="store_true", help="also log the losses for TensorBoard (RUN/tensorboard)")
-    p.add_argument("--snapshot-every", type=int, help="keep the weights every this many steps (snapshots/)")
+    p.add_argument("--snapshot-every", type=integer(1), help="keep the weights every this many steps (snapshots/)")
     p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
     p.add_argument(
         "--memory-format",
@@ -45,28 +46,28 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--rel-logit-weight",
-        type=float,
+        type=real(0),
         help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)",
     )
     p.add_argument(
         "--ap-weight",
-        type=float,
+        type=real(0),
         help="weight of the unweighted descriptor AP term (1 - AP) beside R2D2's losses (lburst's presets: 0.25; paper: 0)",
     )
-    p.add_argument("--lr", type=float, help="Adam's learning rate (default: the preset's)")
+    p.add_argument("--lr", type=real(0, 1, low_open=True), help="Adam's learning rate (default: the preset's)")
     p.add_argument(
         "--rel-base",
-        type=float,
+        type=real(0, 1),
         help="R2D2's base AP (kappa) of the reliability loss: pixels whose AP passes it learn to be reliable (default 0.5)",
     )
     p.add_argument(
         "--distill-weight",
-        type=float,
+        type=real(0),
         help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)",
     )
     p.add_argument(
         "--spread-weight",
-        type=float,
+        type=real(0),
         help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)",
     )
     p.add_argument(
@@ -79,7 +80,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="distil from this frozen network on the same noisy bursts (a checkpoint or a shipped name, e.g. lburst-b5)",
     )
     p.add_argument("--init", help="start from this checkpoint of our own (e.g. lburst/weights/lburst-b5.pt)")
-    p.add_argument("--seed", type=int)
+    p.add_argument("--seed", type=integer(0))
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument("--device")
 
