@@ -81,6 +81,8 @@ def create(spec: str = DEFAULT) -> Matcher:
         key, eq, value = pair.partition("=")
         if not eq or not key.strip():
             raise ValueError(f"bad option {pair!r} in matcher spec {spec!r}: expected KEY=VALUE")
+        if key.strip() in given:
+            raise ValueError(f"option {key.strip()!r} given twice in matcher spec {spec!r}")
         given[key.strip()] = value.strip()
     info = _MATCHERS[name]
     matcher = info.factory(parse_options(info.options, given, name, kind="matcher"))

@@ -44,3 +44,21 @@ def test_binary_descriptors_still_match():
     rng = np.random.default_rng(2)
     a = rng.integers(0, 256, (40, 32), dtype=np.uint8)
     assert len(matching.create("mnn")(_feats(a), _feats(a.copy()))) == 40
+
+
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("lburst:", "nothing after 'lburst:'"),
+        ("merge+lburst: ,top_k=5", "nothing after 'lburst:'"),
+        ("sift,max_features=100,max_features=200", "option 'max_features' given twice"),
+    ],
+)
+def test_an_empty_checkpoint_or_a_repeated_option_is_refused(spec, message):
+    with pytest.raises(ValueError, match=message):
+        methods.create(spec)
+
+
+def test_a_repeated_matcher_option_is_refused():
+    with pytest.raises(ValueError, match="option 'ratio' given twice"):
+        matching.create("ratio,ratio=0.8,ratio=0.9")

@@ -130,12 +130,18 @@ class Spec:
 
 def _split(head: str, spec: str) -> tuple[str, str | None, dict[str, str]]:
     first, *pairs = head.split(",")
-    name, _, arg = first.partition(":")
+    name, colon, arg = first.partition(":")
+    if colon and not arg.strip():
+        raise ValueError(
+            f"method spec {spec!r}: nothing after {name.strip() + ':'!r} (a checkpoint file or a shipped name)"
+        )
     options = {}
     for pair in pairs:
         key, eq, value = pair.partition("=")
         if not eq or not key.strip():
             raise ValueError(f"bad option {pair!r} in method spec {spec!r}: expected KEY=VALUE")
+        if key.strip() in options:
+            raise ValueError(f"option {key.strip()!r} given twice in method spec {spec!r}")
         options[key.strip()] = value.strip()
     return name.strip(), (arg or None), options
 
