@@ -70,3 +70,16 @@ def test_bad_onnx_file_is_a_clear_error(tmp_path):
     bad.write_bytes(b"nope")
     with pytest.raises(CheckpointError, match="bad.onnx"):
         OnnxRunner(bad)
+
+
+def test_another_network_with_the_same_input_channels_is_refused_by_name(tmp_path):
+    import onnx
+    from onnx import TensorProto, helper
+
+    x = helper.make_tensor_value_info("burst", TensorProto.FLOAT, [1, 15, "h", "w"])
+    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, [1, 15, "h", "w"])
+    graph = helper.make_graph([helper.make_node("Relu", ["burst"], ["logits"])], "other", [x], [y])
+    path = tmp_path / "other.onnx"
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 18)]), path)
+    with pytest.raises(CheckpointError, match=r"other.onnx: not an lburst export .*outputs \['logits'\]"):
+        LBurst.from_onnx(path)

@@ -131,6 +131,13 @@ class OnnxRunner:
             self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
         except Exception as exc:
             raise CheckpointError(f"{path}: not a readable ONNX model ({exc})") from exc
+        inputs = [i.name for i in self.session.get_inputs()]
+        outputs = [o.name for o in self.session.get_outputs()]
+        if inputs != [INPUT_NAME] or outputs != list(OUTPUT_NAMES):
+            raise CheckpointError(
+                f"{path}: not an lburst export (inputs {inputs}, outputs {outputs}; expected [{INPUT_NAME!r}] and "
+                f"{list(OUTPUT_NAMES)}, as `lburst export onnx` writes)"
+            )
         channels = self.session.get_inputs()[0].shape[1]
         if not isinstance(channels, int) or channels % 3:
             raise CheckpointError(f"{path}: input has {channels} channels, not 3N")
