@@ -112,6 +112,19 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pg
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg")
 
 
+def check_output_outside(out: str | Path, inputs: Sequence[str | Path]) -> None:
+    """``ValueError`` when the output folder ``out`` is, or is inside, an input folder: a
+    second run would read the first run's outputs as input (``reconstruct S --out S`` took
+    ``S/images/`` for a burst; ``extract B --out B`` recomputed every time)."""
+    target = Path(os.path.abspath(out))
+    for source in inputs:
+        folder = Path(os.path.abspath(source))
+        if folder.is_dir() and (target == folder or folder in target.parents):
+            raise ValueError(
+                f"{out}: the output folder is {'' if target == folder else 'inside '}the input {source}; choose one outside it"
+            )
+
+
 def natural_key(name: str) -> list:
     """Sort key that orders ``f2`` before ``f10``."""
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]

@@ -30,9 +30,10 @@ def test_scene_listing_natural_order(tmp_path):
 
 
 def test_empty_folder(tmp_path, capsys):
+    (tmp_path / "scene").mkdir()
     with pytest.raises(ReconstructionError, match="no bursts"):
-        reconstruct_scene(tmp_path, "sift", tmp_path / "out", progress=False)
-    assert cli(["reconstruct", str(tmp_path), "--method", "sift", "--out", str(tmp_path / "out")]) == 1
+        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", progress=False)
+    assert cli(["reconstruct", str(tmp_path / "scene"), "--method", "sift", "--out", str(tmp_path / "out")]) == 1
     assert "no bursts" in capsys.readouterr().err
 
 

@@ -22,7 +22,7 @@ from tqdm import tqdm
 from lburst import store
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_recording_arguments, recording_options
-from lburst.io import BurstError, atomic_path, load_burst, read_features_npz, write_features_h5
+from lburst.io import BurstError, atomic_path, check_output_outside, load_burst, read_features_npz, write_features_h5
 from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
 from lburst.model.runtimes import RUNTIMES
@@ -162,6 +162,7 @@ def main(args: argparse.Namespace) -> int:
     spec = method_spec(args.method, args.weights, args.frame_order)
     options = {}
     try:
+        check_output_outside(args.out, args.bursts)
         wanted = {
             "top_k": str(args.top_k),
             "device": args.device,

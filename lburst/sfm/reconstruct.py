@@ -32,7 +32,7 @@ from tqdm import tqdm
 
 from lburst import store
 from lburst.features import Features, check_features
-from lburst.io import atomic_path, file_sha1, read_features_npz, to_uint8, write_image
+from lburst.io import atomic_path, check_output_outside, file_sha1, read_features_npz, to_uint8, write_image
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, exif_source, list_scene, load_item, reference_cameras
 from lburst.sources import is_recording
@@ -410,6 +410,10 @@ def reconstruct_scene(
 
     opts = ReconstructOptions(**options)
     out = Path(out_dir)
+    try:
+        check_output_outside(out, [scene_dir])
+    except ValueError as err:
+        raise ReconstructionError(str(err)) from None
     if not _utf8(str(out.resolve())):
         raise ReconstructionError(f"{out!s}: the output path is not valid UTF-8, which COLMAP cannot use")
     source_error = None
