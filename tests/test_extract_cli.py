@@ -92,6 +92,19 @@ def test_features_h5_holds_every_finished_burst(tmp_path):
         assert sorted(f) == ["b0", "b1"]
 
 
+def test_a_second_h5_run_keeps_the_first_runs_bursts(tmp_path):
+    import h5py
+
+    bursts = [str(_small_burst(tmp_path / f"b{i}", i)) for i in range(2)]
+    out = tmp_path / "out"
+    assert main(["extract", bursts[0], "--out", str(out), "--method", "sift", "--h5"]) == 0
+    np.savez(out / "foreign.npz", keypoints=np.zeros((3, 2)))  # not lburst's: left out
+    assert main(["extract", bursts[1], "--out", str(out), "--method", "sift", "--h5"]) == 0
+    with h5py.File(out / "features.h5") as f:
+        assert sorted(f) == ["b0", "b1"]
+        np.testing.assert_array_equal(f["b0/keypoints"][()], np.load(out / "b0.npz")["keypoints"][:, :2])
+
+
 def test_features_h5_is_written_when_no_burst_finished(tmp_path, capsys):
     import h5py
 

@@ -5,8 +5,8 @@ Each ``.npz`` records what made it (:mod:`lburst.store`: the method spec, its we
 SHA-1 and options, the burst's path and content SHA-1); a re-run skips a burst only when
 its file holds the same burst by the same method, and recomputes it otherwise.  A name
 that two different bursts map to (``a/b0`` and ``c/b0``) is refused for the second.
-``features.h5`` is written at the end from the ``.npz`` of every finished burst of the
-run.  Every file is written atomically, and a burst that fails is reported and
+``features.h5`` is written at the end from every lburst ``.npz`` in the output folder
+(this run's and earlier runs'), as hloc expects one features file per folder.  Every file is written atomically, and a burst that fails is reported and
 skipped: the exit code is 1 if any failed.
 """
 
@@ -118,6 +118,16 @@ def extract_recording(
     return done, skipped, None
 
 
+def features_in_folder(out: Path) -> dict[str, Path]:
+    """features.h5 group -> ``.npz`` of every lburst features file in ``out`` (a burst's
+    ``NAME.npz``, a recording's ``REC/KEYFRAME.npz``); files without lburst's metadata are left out."""
+    found = {}
+    for npz in sorted(list(out.glob("*.npz")) + list(out.glob("*/*.npz"))):
+        if store.read_meta(npz) is not None:
+            found[npz.relative_to(out).with_suffix("").as_posix()] = npz
+    return found
+
+
 def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
     """hloc's ``features.h5`` from finished ``.npz`` files (group name, file), atomically."""
     import h5py
@@ -204,7 +214,7 @@ def main(args: argparse.Namespace) -> int:
         finished.append((name, target))
         done += computed
     if args.h5:
-        write_h5(args.out / "features.h5", finished)
+        write_h5(args.out / "features.h5", sorted({**features_in_folder(args.out), **dict(finished)}.items()))
     print(
         f"{done} bursts extracted to {args.out}, {len(args.bursts) - done - len(failed)} already done, "
         f"{len(failed)} failed"
