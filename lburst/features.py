@@ -55,6 +55,8 @@ def check_features(features: Features) -> Features:
         raise ValueError(f"descriptors must be (K, D) with K={k}, got {d.shape}")
     if d.dtype not in (np.float32, np.uint8):
         raise ValueError(f"descriptors must be float32 or uint8, got {d.dtype}")
+    if not np.isfinite(features["keypoints"]).all() or (d.dtype == np.float32 and not np.isfinite(d).all()):
+        raise ValueError("keypoints and descriptors must be finite (no NaN or inf)")
     return features
 
 

@@ -103,6 +103,16 @@ def save(path: str | Path, features: Features, image_size: tuple[int, int], key:
     return write_features_npz(path, features, image_size, meta={"key": key, **info})
 
 
+def is_foreign(path: str | Path) -> bool:
+    """True if ``path`` is a readable ``.npz`` that lburst did not write (no ``_meta``): a file
+    of someone else's, which lburst must not overwrite unasked."""
+    try:
+        with np.load(path) as data:
+            return "_meta" not in data.files
+    except (OSError, ValueError, EOFError):
+        return False  # unreadable (a torn write of ours, or not an npz): recomputed as before
+
+
 def same_source(meta: dict[str, Any] | None, key: dict[str, Any]) -> bool:
     """True if the file with ``meta`` holds (possibly stale) features of the burst of ``key``:
     the same path, or the same content.  A file without a key counts as the same."""

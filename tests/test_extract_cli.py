@@ -122,3 +122,21 @@ def test_extract_dot_names_the_output_after_the_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(burst)
     assert main(["extract", ".", "--out", str(tmp_path / "out"), "--method", "sift"]) == 0
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["here.npz"]
+
+
+def test_a_foreign_npz_is_not_overwritten_and_a_nan_one_is_recomputed(tmp_path, capsys):
+    burst = str(_small_burst(tmp_path / "b0", 0))
+    out = tmp_path / "out"
+    out.mkdir()
+    np.savez(out / "b0.npz", mine=np.arange(3))
+    assert main(["extract", burst, "--out", str(out), "--method", "sift"]) == 1
+    assert "was not written by lburst" in capsys.readouterr().err
+    assert list(np.load(out / "b0.npz").files) == ["mine"]
+    assert main(["extract", burst, "--out", str(out), "--method", "sift", "--overwrite"]) == 0
+    with np.load(out / "b0.npz") as data:
+        poisoned = {k: data[k] for k in data.files}
+    poisoned["descriptors"] = np.full_like(poisoned["descriptors"], np.nan)
+    np.savez(out / "b0.npz", **poisoned)
+    assert main(["extract", burst, "--out", str(out), "--method", "sift"]) == 0
+    assert "1 bursts extracted" in capsys.readouterr().out
+    assert np.isfinite(np.load(out / "b0.npz")["descriptors"]).all()

@@ -157,6 +157,10 @@ def extract_burst(
     if target.exists() and not args.overwrite:
         if store.load(target, key) is not None:
             return name, target, False
+        if store.is_foreign(target):
+            raise BurstError(
+                f"{path}: {target} exists and was not written by lburst; use another --out, or --overwrite to replace it"
+            )
         meta = store.read_meta(target)
         if not store.same_source(meta, key):
             raise BurstError(
