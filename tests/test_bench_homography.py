@@ -145,3 +145,16 @@ def test_every_k_th_sequence_in_name_order(tmp_path):
     assert sorted(results["methods"]["sift"]["sigma0"]["pairs"]) == ["a", "c"]
     with pytest.raises(ValueError, match="every must be an integer >= 1"):
         run_homography_benchmark(tmp_path / "data", ["sift"], [0], tmp_path / "out", progress=False, every=0)
+
+
+@pytest.mark.parametrize("deg", [90, 180, 37])
+def test_turned_views_keep_their_geometry_and_the_table_is_written(tmp_path, deg):
+    """SIFT is rotation-invariant: with images 2-6 turned, the composed homographies must still
+    put its matches in place, and a run with no pair rotated <= 25 degrees still writes its table."""
+    _write_sequence(tmp_path / "data" / "seq")
+    results = run_homography_benchmark(tmp_path / "data", ["sift"], [0], tmp_path / "out", progress=False, rotation=deg)
+    summary = results["methods"]["sift"]["sigma0"]["summary"]
+    assert summary["all"]["mma"][2] > 0.8
+    assert summary["rotation_le_25"]["pairs"] == 0
+    assert results["protocol"]["rotation_deg"] == deg
+    assert f"turned by {deg} degrees" in (tmp_path / "out" / "results.md").read_text()

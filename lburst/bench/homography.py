@@ -20,6 +20,10 @@ Protocol (reproducible by anyone):
 4. Mutual nearest neighbours; metrics of :mod:`lburst.bench.metrics` for the pairs
    (1, K), K = 2..6; averaged over the 5 pairs of a sequence, then over sequences.
    A second table keeps only pairs rotated by 25 degrees or less (pooled).
+5. ``--rotation DEG`` turns images 2-6 of every sequence in-plane by DEG degrees about
+   their centre, on a canvas that holds the whole turned image (quarter turns exact,
+   others bilinear with black corners), and composes the homographies with the turn:
+   the views of neighbouring survey lines (180) or of crossing ones (90).
 
 Features are kept in the features store (:mod:`lburst.store`), one file per (method,
 noise level, sequence, image) under ``OUT/cache``, keyed as ``lburst extract`` keys them:
@@ -43,7 +47,7 @@ from tqdm import tqdm
 
 from lburst import store
 from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, rotation_deg
-from lburst.bench.sequences import Sequence, list_sequences, read_sequence
+from lburst.bench.sequences import Sequence, list_sequences, read_sequence, rotate_sequence
 from lburst.features import Features
 from lburst.io import atomic_path
 from lburst.methods import method_slug
@@ -226,9 +230,12 @@ def run_homography_benchmark(
     motion: MotionRange = MotionRange(),
     matcher: str = "mnn",
     every: int = 1,
+    rotation: float = 0.0,
 ) -> dict:
     """Run the protocol, matching with the ``matcher`` spec; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``.
-    ``every`` > 1 keeps every ``every``-th sequence in name order (the first, the ``every + 1``-th, ...)."""
+    ``every`` > 1 keeps every ``every``-th sequence in name order (the first, the ``every + 1``-th, ...);
+    ``rotation`` turns images 2-6 of every sequence in-plane by that many degrees
+    (:func:`lburst.bench.sequences.rotate_sequence`)."""
     from lburst.matching import create
 
     out = Path(out)
@@ -249,11 +256,12 @@ def run_homography_benchmark(
             "thresholds": list(THRESHOLDS),
             "burst_motion": asdict(motion),
             "matcher": matcher,
+            "rotation_deg": float(rotation),
         },
         "methods": {},
     }
     bar = tqdm(total=len(levels) * len(folders) * len(methods) * 6, desc="homography bench", disable=not progress)
-    sequences = {f.name: read_sequence(f, max_side) for f in folders}
+    sequences = {f.name: rotate_sequence(read_sequence(f, max_side), rotation) for f in folders}
     paths = {f.name: f for f in folders}
     kinds = {name: seq.kind for name, seq in sequences.items()}
     for spec, runner in runners.items():
@@ -302,6 +310,9 @@ def markdown(results: dict) -> str:
     methods = results["methods"]
     levels = list(next(iter(methods.values())).keys()) if methods else []
     lines = []
+    turn = results["protocol"].get("rotation_deg", 0.0)
+    if turn:
+        lines += [f"Images 2-6 turned by {turn:g} degrees.", ""]
     for level in levels:
         first = methods[next(iter(methods))][level]["summary"]
         for part, title in (
@@ -314,6 +325,8 @@ def markdown(results: dict) -> str:
                 )
             ]
         ):
+            if not first[part].get("mma"):
+                continue  # no such pairs (e.g. no pair rotated <= 25 degrees when images 2-6 are turned)
             lines += [f"### {level}: {title}", "", head]
             lines += [_row(spec, methods[spec][level]["summary"][part]) for spec in methods]
             lines.append("")

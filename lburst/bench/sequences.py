@@ -94,6 +94,21 @@ def read_sequence(folder: str | Path, max_side: int | None = None) -> Sequence:
     return Sequence(folder.name, images, homographies)
 
 
+def rotate_sequence(seq: Sequence, deg: float) -> Sequence:
+    """``seq`` with images 2-6 turned in-plane by ``deg`` about their centre
+    (:func:`lburst.rotation.rotate_image`), and the homographies composed with the turn."""
+    from lburst.rotation import rotate_image
+
+    if float(deg) == 0:
+        return seq
+    turned = [rotate_image(im, deg) for im in seq.images[1:]]
+    return Sequence(
+        seq.name,
+        [seq.images[0], *(im for im, _ in turned)],
+        [m @ h for (_, m), h in zip(turned, seq.homographies)],
+    )
+
+
 def list_sequences(data: str | Path) -> list[Path]:
     """Sequence folders under ``data`` (sorted); error if none."""
     data = Path(data)

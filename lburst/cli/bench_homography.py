@@ -43,6 +43,14 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         metavar="K",
         help="use every K-th sequence in name order (the first, the K+1-th, ...): a quicker, fixed subset",
     )
+    p.add_argument(
+        "--rotation",
+        type=real(-360, 360),
+        default=0.0,
+        metavar="DEG",
+        help="turn images 2-6 of every sequence in-plane by DEG degrees about their centre "
+        "(counter-clockwise; the homographies follow): matching across rotated views",
+    )
     add_matcher_argument(p)
 
 
@@ -60,6 +68,7 @@ def main(args: argparse.Namespace) -> int:
             motion=motion,
             matcher=args.matcher,
             every=args.every,
+            rotation=args.rotation,
         )
     except (FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
