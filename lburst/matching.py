@@ -15,6 +15,13 @@ against the matcher's options dataclass (:func:`lburst.methods.options.parse_opt
   ``ratio`` (default 0.8), kept only when mutual unless ``mutual=false``; these are
   kornia's ``match_smnn`` and ``match_snn``.
 
+Features extracted at several rotations (``rotations`` (K,): the quarter turns of the
+burst that each keypoint was found in, :meth:`lburst.LBurst.extract`) are matched set
+against set: the upright set of ``a`` against each set of ``b`` (or each set of ``a``
+against ``b`` when only ``a`` has them), keeping the pair of sets with the most matches;
+the indices still refer to the whole features.  So two views turned by 90 or 180 degrees
+against each other match as two upright ones do.
+
 A learned matcher registers the same way (:func:`register` with its options class) and
 receives the whole features dicts.
 """
@@ -90,6 +97,26 @@ def create(spec: str = DEFAULT) -> Matcher:
     return matcher
 
 
+def by_rotation(match: Callable[[np.ndarray, np.ndarray], np.ndarray], a: Features, b: Features) -> np.ndarray:
+    """``match(descriptors_a, descriptors_b)`` through the rotation sets of ``a`` and ``b``
+    (see the module docstring); without them, ``match`` of all descriptors."""
+    ra, rb = a.get("rotations"), b.get("rotations")
+    if ra is None and rb is None:
+        return match(a["descriptors"], b["descriptors"])
+    everything_a, everything_b = np.arange(len(a["descriptors"])), np.arange(len(b["descriptors"]))
+    if rb is not None:
+        fixed = np.flatnonzero(ra == ra.min()) if ra is not None and len(ra) else everything_a
+        pairs = [(fixed, np.flatnonzero(rb == turn)) for turn in np.unique(rb)]
+    else:
+        pairs = [(np.flatnonzero(ra == turn), everything_b) for turn in np.unique(ra)]
+    best = np.zeros((0, 2), np.int64)
+    for ia, ib in pairs:
+        found = match(a["descriptors"][ia], b["descriptors"][ib])
+        if len(found) > len(best):
+            best = np.stack([ia[found[:, 0]], ib[found[:, 1]]], 1).astype(np.int64)
+    return best
+
+
 def _tensors(a: np.ndarray, b: np.ndarray, device: str):
     import torch
 
@@ -114,9 +141,10 @@ class MutualNearestNeighbours:
     def __call__(self, a: Features, b: Features) -> np.ndarray:
         from lburst.match import mutual_nearest_neighbours
 
-        return mutual_nearest_neighbours(
-            a["descriptors"], b["descriptors"], self.options.max_distance, self.options.device
-        )
+        def match(da: np.ndarray, db: np.ndarray) -> np.ndarray:
+            return mutual_nearest_neighbours(da, db, self.options.max_distance, self.options.device)
+
+        return by_rotation(match, a, b)
 
 
 @register("mnn", MNNOptions)
@@ -144,11 +172,13 @@ class RatioTest:
         self.name = "ratio"
 
     def __call__(self, a: Features, b: Features) -> np.ndarray:
+        return by_rotation(self._match, a, b)
+
+    def _match(self, da: np.ndarray, db: np.ndarray) -> np.ndarray:
         import torch
 
         from lburst.match import _distances, check_descriptors
 
-        da, db = a["descriptors"], b["descriptors"]
         check_descriptors(da, db)
         if len(da) == 0 or len(db) == 0:
             return np.zeros((0, 2), np.int64)

@@ -10,7 +10,7 @@ import numpy as np
 
 from lburst.features import Features
 from lburst.methods import register
-from lburst.model.extractor import LBurst, MultiScaleConfig
+from lburst.model.extractor import ROTATIONS, LBurst, MultiScaleConfig
 from lburst.model.network import autocast_dtype
 from lburst.model.runtimes import RUNTIMES
 
@@ -43,7 +43,9 @@ class LearnedOptions:
     """Options of a learned method: loading (``frame_order``, ``device``, ``runtime``: one of
     :data:`lburst.model.runtimes.RUNTIMES` or ``auto``, by default ``auto`` for the light
     network and ``torch`` for the others, see :meth:`lburst.LBurst.from_checkpoint`), how many
-    keypoints (``top_k``; ``none``: all) and the :class:`lburst.model.extractor.MultiScaleConfig`
+    keypoints (``top_k``; ``none``: all), ``rotations`` (1, 2 or 4: also extract from the burst
+    turned by 180 degrees or by every quarter turn, so that views rotated against each other
+    match; see :meth:`lburst.LBurst.extract`) and the :class:`lburst.model.extractor.MultiScaleConfig`
     fields below (the paper's defaults)."""
 
     top_k: int | None = 4000
@@ -59,9 +61,15 @@ class LearnedOptions:
     fast: bool = MultiScaleConfig.fast
     precision: str = MultiScaleConfig.precision
     whiten: bool = MultiScaleConfig.whiten
+    rotations: int = 1
 
     def __post_init__(self) -> None:
         autocast_dtype(self.precision)  # a clear error for an unknown precision
+        if self.rotations not in ROTATIONS:
+            raise ValueError(
+                f"rotations must be one of {', '.join(map(str, ROTATIONS))} (views turned by 0; 0 and 180; "
+                f"every 90 degrees), got {self.rotations!r}"
+            )
         if self.runtime is not None and self.runtime != "auto" and self.runtime not in RUNTIMES:
             raise ValueError(f"unknown runtime {self.runtime!r}: use auto or one of {', '.join(RUNTIMES)}")
 
@@ -86,9 +94,10 @@ class LearnedOptions:
 class LearnedExtractor:
     """Wraps :class:`lburst.LBurst` in the extractor interface."""
 
-    def __init__(self, model: LBurst, top_k: int | None = 4000, **options) -> None:
+    def __init__(self, model: LBurst, top_k: int | None = 4000, rotations: int = 1, **options) -> None:
         self.model = model
         self.top_k = top_k
+        self.rotations = rotations
         self.options = options
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)  # ValueError now for a bad option, not per burst
         if cfg.whiten:
@@ -96,7 +105,7 @@ class LearnedExtractor:
         self.name = "lburst"
 
     def __call__(self, burst: np.ndarray) -> Features:
-        return self.model.extract(burst, top_k=self.top_k, **self.options)
+        return self.model.extract(burst, top_k=self.top_k, rotations=self.rotations, **self.options)
 
 
 def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtractor:
@@ -109,7 +118,7 @@ def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtr
         if arg
         else LBurst.pretrained(default, device=options.device, runtime=options.runtime)
     )
-    return LearnedExtractor(model, options.top_k, **options.multiscale())
+    return LearnedExtractor(model, options.top_k, options.rotations, **options.multiscale())
 
 
 def _weights(default: str):

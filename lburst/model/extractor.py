@@ -35,6 +35,8 @@ from lburst.model.network import (
 )
 from lburst.model.runtimes import choose_runtime, inference_form, make_runner
 
+ROTATIONS = (1, 2, 4)  # extraction at 0; 0 and 180; or every quarter turn (LBurst.extract)
+
 
 @dataclass(frozen=True)
 class MultiScaleConfig:
@@ -441,7 +443,7 @@ class LBurst:
         }
 
     @torch.inference_mode()
-    def extract(self, burst: np.ndarray, top_k: int | None = 4000, **options) -> Features:
+    def extract(self, burst: np.ndarray, top_k: int | None = 4000, rotations: int = 1, **options) -> Features:
         """Multi-scale keypoints and descriptors of the burst's common frame.
 
         ``options`` are fields of :class:`MultiScaleConfig`.  Returns, sorted by
@@ -449,12 +451,36 @@ class LBurst:
         docstring for the convention), ``scales`` (K,) (32 / level scale, as
         published), ``scores`` (K,) = reliability x repeatability, and
         ``descriptors`` (K, 128) float32, L2-normalised.
+
+        ``rotations`` 2 or 4 also extracts from the burst turned by 180 degrees (2) or by
+        each quarter turn (4), up to ``top_k`` keypoints each, mapped back to the burst's
+        pixels; ``rotations`` (K,) uint8 then says by how many quarter turns
+        (counter-clockwise) each keypoint's burst was turned, and the features are sorted
+        by it, then by score.  Matchers match views rotated against each other through
+        these sets (:mod:`lburst.matching`): the cost of extraction grows ``rotations``-fold.
         """
+        if rotations != 1:
+            return self._extract_turned(burst, top_k, rotations, **options)
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
         if cfg.whiten:
             self.check_whitening()
         x, scale = self._input(burst, cfg)
         return self._extract(x, cfg, self._full_size(burst), scale)
+
+    def _extract_turned(self, burst: np.ndarray, top_k: int | None, rotations: int, **options) -> Features:
+        from lburst.rotation import map_points, rotation_map, turn_burst
+
+        if rotations not in ROTATIONS:
+            raise ValueError(f"rotations must be one of {ROTATIONS}, got {rotations!r}")
+        burst = np.asarray(burst)
+        parts = []
+        for turns in range(0, 4, 4 // rotations):
+            feats = self.extract(turn_burst(burst, turns), top_k, **options)
+            to_turned, _ = rotation_map(90 * turns, burst.shape[1:3])
+            feats["keypoints"] = map_points(feats["keypoints"], np.linalg.inv(to_turned))
+            feats["rotations"] = np.full(len(feats["keypoints"]), turns, np.uint8)
+            parts.append(feats)
+        return {key: np.concatenate([f[key] for f in parts]) for key in parts[0]}
 
     @torch.inference_mode()
     def extract_batch(self, bursts, top_k: int | None = 4000, **options) -> list[Features]:
