@@ -1,5 +1,7 @@
 """``lburst simulate flight``: the synthetic night flight scene (:mod:`lburst.scenes.night_flight`),
-as bursts, a video or DNG frames (:mod:`lburst.scenes.flight_recording`)."""
+as bursts, a video or DNG frames (:mod:`lburst.scenes.flight_recording`); an arc (``--turn``,
+``--loop``) or a lawnmower survey (``--survey LINES``, whose path sets the number of bursts,
+so ``--bursts`` is refused with it)."""
 
 from __future__ import annotations
 
@@ -36,10 +38,46 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "--crf", type=integer(0, 51), default=16, help="H.264 quality of --video (lower: better; default 16)"
     )
     p.add_argument(
-        "--turn", type=real(-3600, 3600), default=default.turn_deg, help="heading change over the flight, degrees"
+        "--turn",
+        type=real(-3600, 3600),
+        default=default.turn_deg,
+        help="heading change over the flight, degrees (the arc path; not for --survey)",
     )
     p.add_argument("--loop", action="store_true", help="fly a loop that passes over its start again (--turn 380)")
-    p.add_argument("--bursts", type=integer(2), default=default.n_bursts, help="number of bursts")
+    p.add_argument(
+        "--survey",
+        type=integer(2),
+        metavar="LINES",
+        help="fly a lawnmower survey instead of the arc: LINES parallel lines, each the reverse of the last "
+        "and --line-spacing to the left of it, joined by semicircular turns; a burst every 8 m of the whole "
+        "path (so not with --bursts or --loop), and OUT/survey.json gives each burst's line",
+    )
+    p.add_argument(
+        "--line-length",
+        type=real(0, 10_000, low_open=True),
+        default=default.line_length,
+        metavar="M",
+        help="--survey: length of a line, metres",
+    )
+    p.add_argument(
+        "--line-spacing",
+        type=real(0, 1_000, low_open=True),
+        default=default.line_spacing,
+        metavar="M",
+        help="--survey: distance between neighbouring lines, metres",
+    )
+    p.add_argument(
+        "--pitch",
+        type=real(0, 60),
+        default=default.pitch_deg,
+        metavar="DEG",
+        help="camera tilt from nadir towards the direction of flight, degrees (0: straight down)",
+    )
+    p.add_argument(
+        "--bursts",
+        type=integer(2),
+        help=f"number of bursts (default {default.n_bursts}; a --survey derives it from its path and refuses it)",
+    )
     p.add_argument("--frames", type=integer(1, 99), default=default.frames_per_burst, help="frames per burst (odd)")
     p.add_argument("--size", default=f"{default.width}x{default.height}", help="WIDTHxHEIGHT")
     p.add_argument("--noise", default=default.noise, help="noise spec, e.g. gaussian:50 (default: none)")
@@ -47,6 +85,37 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--daylight", action="store_true", help="no night lighting")
     p.add_argument("--supersample", type=integer(1, 16), default=default.supersample, help="anti-aliasing factor")
     p.add_argument("--seed", type=integer(0), default=default.seed)
+
+
+def survey_conflict(args: argparse.Namespace) -> str | None:
+    """Why ``--survey`` cannot go with the other options given, or None."""
+    if args.survey is None:
+        return None
+    if args.loop:
+        return "--survey and --loop are two different paths; give one"
+    if args.bursts is not None:
+        return "--survey sets the number of bursts from its path (one every 8 m); leave out --bursts"
+    return None
+
+
+def flight_config(args: argparse.Namespace, width: int, height: int) -> NightFlightConfig:
+    """The flight the options describe (``ValueError`` if it is not a valid one)."""
+    kwargs: dict = dict(
+        frames_per_burst=args.frames,
+        width=width,
+        height=height,
+        noise=args.noise,
+        exposure=args.exposure,
+        supersample=args.supersample,
+        seed=args.seed,
+        turn_deg=380.0 if args.loop else args.turn,
+        pitch_deg=args.pitch,
+    )
+    if args.bursts is not None:
+        kwargs.update(n_bursts=args.bursts)
+    if args.survey is not None:
+        kwargs.update(survey_lines=args.survey, line_length=args.line_length, line_spacing=args.line_spacing)
+    return NightFlightConfig.daylight(**kwargs) if args.daylight else NightFlightConfig(**kwargs)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -63,22 +132,19 @@ def main(args: argparse.Namespace) -> int:
     if args.out is None and args.video is None and args.dng is None:
         print("error: give a scene folder OUT, --video FILE.mp4 or --dng FOLDER", file=sys.stderr)
         return 2
-    kwargs = dict(
-        n_bursts=args.bursts,
-        frames_per_burst=args.frames,
-        width=width,
-        height=height,
-        noise=args.noise,
-        exposure=args.exposure,
-        supersample=args.supersample,
-        seed=args.seed,
-        turn_deg=380.0 if args.loop else args.turn,
-    )
+    conflict = survey_conflict(args)
+    if conflict:
+        print(f"error: {conflict}", file=sys.stderr)
+        return 2
     try:
-        cfg = NightFlightConfig.daylight(**kwargs) if args.daylight else NightFlightConfig(**kwargs)
+        cfg = flight_config(args, width, height)
         if args.out is not None:
             ref = make_night_flight(args.out, cfg)
-            print(f"{args.out}: {cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, trajectory {ref.length:.1f} m")
+            path = f"a survey of {cfg.survey_lines} lines, " if cfg.survey_lines else ""
+            print(
+                f"{args.out}: {path}{cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, "
+                f"trajectory {ref.length:.1f} m"
+            )
         if args.video is not None or args.dng is not None:
             frames = f"{recording.frame_count(cfg)} frames at {recording.fps(cfg):g} fps, {width}x{height}"
             if args.video is not None:

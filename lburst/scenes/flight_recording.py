@@ -2,7 +2,7 @@
 ground-truth poses of every frame.
 
 The drone flies the trajectory of :mod:`lburst.scenes.night_flight` (``(n_bursts - 1) *
-burst_spacing`` metres) and the camera records a frame every ``frame_interval`` seconds:
+burst_spacing`` metres, an arc or a survey, whose ``n_bursts`` its path sets) and the camera records a frame every ``frame_interval`` seconds:
 frame ``j`` is rendered from the pose at time ``j / fps`` (``fps = 1 / frame_interval``),
 so the bursts of the scene version are the frames around ``j = i * burst_spacing /
 (speed * frame_interval)``.  Ground truth is written per frame in TUM format

@@ -3,9 +3,17 @@ at regular spacing, with exact ground-truth cameras.
 
 Trajectory: at time ``s`` (seconds) the drone is at altitude ``altitude`` and has flown
 ``speed * s`` metres along a path that starts at the origin heading ``heading_deg``
-(counter-clockwise from +x) and turns steadily by ``turn_deg`` over the flight.  The
-camera looks forward and down, ``pitch_deg`` from nadir, with a small deterministic
-attitude wobble (``shake_deg``).  Burst ``i`` is centred at time
+(counter-clockwise from +x).  By default (``survey_lines = 0``) the path is an arc that
+turns steadily by ``turn_deg`` over the flight.  A survey (``survey_lines = L >= 2``) is a
+lawnmower pattern instead: ``L`` straight lines of ``line_length``, parallel to the
+heading, line ``i`` flown the other way from line ``i - 1`` and ``i * line_spacing`` to the
+left of the first (counter-clockwise from the heading), joined by semicircular turns of
+radius ``line_spacing / 2``; neighbouring lines thus see the ground turned by 180 degrees.
+A survey's bursts cover its whole path (``L * line_length + (L - 1) * pi * line_spacing /
+2`` metres), so its ``n_bursts`` is derived (:func:`survey_bursts`), and ``OUT/survey.json``
+gives the line of each burst (:func:`survey_line`).  The camera looks forward along the
+path and down, ``pitch_deg`` from nadir, with a small deterministic attitude wobble
+(``shake_deg``).  Burst ``i`` is centred at time
 ``i * burst_spacing / speed``; its frame ``k`` (0-based, of ``frames_per_burst``) is
 rendered from the pose at ``(k - mid) * frame_interval`` seconds later, so the frames of
 a burst see the scene with real parallax, and the middle frame is the common frame whose
@@ -16,6 +24,7 @@ Scene folder written by :func:`make_night_flight`::
     OUT/night_flight.json        the configuration (a re-run with another one is refused)
     OUT/0000/frame_000.png ...   uint8 RGB frames of each burst, temporal order
     OUT/reference.json           exact poses of the common frames
+    OUT/survey.json              a survey only: burst name -> its line (-1: on a turn)
 """
 
 from __future__ import annotations
@@ -24,18 +33,21 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lburst.io import atomic_path, save_burst
+from lburst.numbers import check_integer, check_real
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
 from lburst.scenes.raycast import cast, intrinsics, rays_through
 from lburst.scenes.reference import Reference
 
 CONFIG_FILE = "night_flight.json"
+SURVEY_FILE = "survey.json"
+SURVEY_FIELDS = ("survey_lines", "line_length", "line_spacing")
 Noise = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 
 
@@ -44,7 +56,8 @@ class NightFlightConfig:
     """The flight, the camera, the noise and the city.  Lengths in metres, times in seconds.
 
     Attributes:
-        n_bursts, frames_per_burst: number of bursts and frames per burst (odd).
+        n_bursts, frames_per_burst: number of bursts and frames per burst (odd); a survey
+            replaces ``n_bursts`` by the count its path makes (:func:`survey_bursts`).
         width, height, hfov_deg: image size and horizontal field of view.
         altitude, speed, heading_deg, turn_deg: flight (see module docstring).
         pitch_deg: camera tilt from nadir, forward.
@@ -56,6 +69,9 @@ class NightFlightConfig:
         noise: noise spec for :func:`lburst.noise.noise_from_spec` (``'none'``: clean).
         seed: seed of the city and of the noise.
         city: how the city looks (:data:`lburst.scenes.city.DAYLIGHT` for a day flight).
+        survey_lines: 0 (the arc path) or the number ``L >= 2`` of survey lines (``turn_deg``
+            then does not apply).
+        line_length, line_spacing: length of a survey line and distance between neighbouring lines.
     """
 
     n_bursts: int = 15
@@ -76,8 +92,12 @@ class NightFlightConfig:
     noise: str = "none"
     seed: int = 0
     city: CityConfig = field(default_factory=CityConfig)
+    survey_lines: int = 0
+    line_length: float = 80.0
+    line_spacing: float = 24.0
 
     def __post_init__(self) -> None:
+        self._check_survey()
         if self.frames_per_burst < 1 or self.frames_per_burst % 2 == 0:
             raise ValueError(f"frames_per_burst must be odd, got {self.frames_per_burst}")
         if self.n_bursts < 1 or self.width < 8 or self.height < 8 or self.supersample < 1:
@@ -89,12 +109,30 @@ class NightFlightConfig:
         if self.city.max_height >= self.altitude - 2:
             raise ValueError("buildings must stay below the flight altitude")
 
+    def _check_survey(self) -> None:
+        """Check the survey fields and, for a survey, derive ``n_bursts`` from its path."""
+        if check_integer(self.survey_lines, "survey_lines", 0) == 1:
+            raise ValueError("survey_lines must be 0 (the arc path) or >= 2 (survey lines), got 1")
+        check_real(self.line_length, "line_length", 0, low_open=True)
+        check_real(self.line_spacing, "line_spacing", 0, low_open=True)
+        if self.survey_lines:
+            check_real(self.burst_spacing, "burst_spacing", 0, low_open=True)
+            check_real(self.speed, "speed", 0, low_open=True)
+            object.__setattr__(self, "n_bursts", survey_bursts(self))
+
     @property
     def vfov_deg(self) -> float:
         return float(np.degrees(2 * np.arctan(np.tan(np.radians(self.hfov_deg) / 2) * self.height / self.width)))
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        """The fields as JSON-ready data; an arc flight with the default survey fields leaves
+        them out (its ``night_flight.json`` is what it was before surveys existed)."""
+        data = dataclasses.asdict(self)
+        defaults = {f.name: f.default for f in dataclasses.fields(self) if f.name in SURVEY_FIELDS}
+        if all(data[name] == value for name, value in defaults.items()):
+            for name in SURVEY_FIELDS:
+                del data[name]
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "NightFlightConfig":
@@ -118,9 +156,51 @@ def frame_time(cfg: NightFlightConfig, burst: int, frame: int) -> float:
     return burst * cfg.burst_spacing / cfg.speed + (frame - cfg.frames_per_burst // 2) * cfg.frame_interval
 
 
-def camera_pose(cfg: NightFlightConfig, time: float) -> tuple[np.ndarray, np.ndarray]:
-    """World-to-camera ``(R (3, 3), t (3,))`` of the drone's camera at ``time``."""
-    s = cfg.speed * time
+def path_length(cfg: NightFlightConfig) -> float:
+    """Metres of path from the first common frame to the end: ``(n_bursts - 1) *
+    burst_spacing`` for the arc, ``L * line_length + (L - 1) * pi * line_spacing / 2`` for a survey."""
+    if not cfg.survey_lines:
+        return (cfg.n_bursts - 1) * cfg.burst_spacing
+    lines = cfg.survey_lines
+    return float(lines * cfg.line_length + (lines - 1) * np.pi * cfg.line_spacing / 2)
+
+
+def survey_bursts(cfg: NightFlightConfig) -> int:
+    """Bursts of a survey: one every ``burst_spacing`` metres from the start of its path to its end."""
+    return int(np.floor(path_length(cfg) / cfg.burst_spacing + 1e-9)) + 1
+
+
+def _survey_place(cfg: NightFlightConfig, s: float) -> tuple[int, float, bool]:
+    """``(i, u, on_line)``: ``s`` metres into a survey is ``u`` metres past the start of line
+    ``i``, on the line itself or (``on_line`` false) on the turn after it.  Before the start
+    and after the end the first and last lines go on straight."""
+    period = cfg.line_length + np.pi * cfg.line_spacing / 2
+    i = int(np.clip(np.floor(s / period), 0, cfg.survey_lines - 1))
+    u = s - i * period
+    if i < cfg.survey_lines - 1 and u >= period - 1e-9:  # the start of the next line, up to rounding
+        i, u = i + 1, u - period
+    return i, u, i == cfg.survey_lines - 1 or u <= cfg.line_length + 1e-9
+
+
+def _survey_point(cfg: NightFlightConfig, s: float) -> tuple[np.ndarray, float]:
+    """Ground position (2,) and heading (radians) ``s`` metres along a survey path."""
+    i, u, on_line = _survey_place(cfg, s)
+    psi0 = np.radians(cfg.heading_deg)
+    forward = np.array([np.cos(psi0), np.sin(psi0)])
+    left = np.array([-np.sin(psi0), np.cos(psi0)])
+    sign = 1 - 2 * (i % 2)  # +1: along the heading, -1: against it
+    psi = psi0 + (i % 2) * np.pi
+    start = i * cfg.line_spacing * left + (i % 2) * cfg.line_length * forward
+    if on_line:
+        return start + sign * u * forward, psi
+    kappa = sign / (cfg.line_spacing / 2)  # turns alternate: left after even lines, right after odd ones
+    turned = psi + kappa * (u - cfg.line_length)
+    arc = np.array([np.sin(turned) - np.sin(psi), np.cos(psi) - np.cos(turned)]) / kappa
+    return start + sign * cfg.line_length * forward + arc, turned
+
+
+def _arc_point(cfg: NightFlightConfig, s: float) -> tuple[np.ndarray, float]:
+    """Ground position (2,) and heading (radians) ``s`` metres along the arc path."""
     total = max((cfg.n_bursts - 1) * cfg.burst_spacing, 1e-9)
     kappa = np.radians(cfg.turn_deg) / total  # heading change per metre
     psi0 = np.radians(cfg.heading_deg)
@@ -129,6 +209,27 @@ def camera_pose(cfg: NightFlightConfig, time: float) -> tuple[np.ndarray, np.nda
         xy = s * np.array([np.cos(psi0), np.sin(psi0)])
     else:
         xy = np.array([np.sin(psi) - np.sin(psi0), np.cos(psi0) - np.cos(psi)]) / kappa
+    return xy, psi
+
+
+def path_point(cfg: NightFlightConfig, s: float) -> tuple[np.ndarray, float]:
+    """Ground position (2,) and heading (radians, counter-clockwise from +x) ``s`` metres
+    along the flight's path (arc or survey, see the module docstring)."""
+    return _survey_point(cfg, s) if cfg.survey_lines else _arc_point(cfg, s)
+
+
+def survey_line(cfg: NightFlightConfig, burst: int) -> int:
+    """The survey line (0-based) that the common frame of ``burst`` lies on, or -1 when it
+    is on a turn; ``ValueError`` for an arc flight."""
+    if not cfg.survey_lines:
+        raise ValueError("survey_line needs a survey (survey_lines >= 2)")
+    i, _, on_line = _survey_place(cfg, burst * cfg.burst_spacing)
+    return i if on_line else -1
+
+
+def camera_pose(cfg: NightFlightConfig, time: float) -> tuple[np.ndarray, np.ndarray]:
+    """World-to-camera ``(R (3, 3), t (3,))`` of the drone's camera at ``time``."""
+    xy, psi = path_point(cfg, cfg.speed * time)
     centre = np.array([xy[0], xy[1], cfg.altitude])
     heading = np.array([np.cos(psi), np.sin(psi), 0.0])
     theta = np.radians(cfg.pitch_deg)
@@ -209,18 +310,27 @@ def render_view(
     return image, depth
 
 
-def view_overlaps(cfg: NightFlightConfig, city: City | None = None, scale: float = 0.25) -> np.ndarray:
+def view_overlaps(
+    cfg: NightFlightConfig,
+    city: City | None = None,
+    scale: float = 0.25,
+    pairs: Sequence[tuple[int, int]] | None = None,
+) -> np.ndarray:
     """(n_bursts - 1,) fraction of the pixels of common frame ``i + 1`` whose surface point
-    is in view and unoccluded in common frame ``i`` (computed at ``scale`` x resolution)."""
+    is in view and unoccluded in common frame ``i`` (computed at ``scale`` x resolution);
+    with ``pairs`` ``[(a, b), ...]``, that fraction for common frame ``b`` seen from ``a``."""
     city = make_city(cfg) if city is None else city
     w, h = max(int(cfg.width * scale), 8), max(int(cfg.height * scale), 8)
     K = intrinsics(w, h, cfg.hfov_deg)
-    views = []
-    for R, t in reference(cfg).poses.values():
+    pairs = [(i, i + 1) for i in range(cfg.n_bursts - 1)] if pairs is None else pairs
+    poses = reference(cfg).poses
+    views = {}
+    for i in sorted({i for pair in pairs for i in pair}):
+        R, t = poses[burst_name(i)]
         hits = cast(K, R, t, w, h, city.lo, city.hi)
-        views.append((R, t, hits.points, hits.t * (hits.dirs @ R[2])))
+        views[i] = (R, t, hits.points, hits.t * (hits.dirs @ R[2]))
     out = []
-    for (Ra, ta, _, depth_a), (_, _, points_b, depth_b) in zip(views[:-1], views[1:]):
+    for (Ra, ta, _, depth_a), (_, _, points_b, depth_b) in ((views[a], views[b]) for a, b in pairs):
         pts = points_b[np.isfinite(depth_b)]
         cam = pts @ Ra.T + ta
         uv = cam[:, :2] / cam[:, 2:] * K[[0, 1], [0, 1]] + K[:2, 2]
@@ -302,4 +412,8 @@ def make_night_flight(
             save_burst(render_burst(cfg, i, city), out / burst_name(i), whole=True)
     ref = reference(cfg)
     ref.save(out / "reference.json")
+    if cfg.survey_lines:
+        lines = {burst_name(i): survey_line(cfg, i) for i in range(cfg.n_bursts)}
+        with atomic_path(out / SURVEY_FILE) as tmp:
+            tmp.write_text(json.dumps(lines, indent=1))
     return ref
