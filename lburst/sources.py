@@ -205,6 +205,13 @@ class Recording:
             raise BurstError(
                 f"{self.path}: no video stream found (a truncated MP4 whose index was at the end, or not a video)"
             )
+        demuxer = container.format.name
+        if demuxer.endswith("_pipe") or demuxer.startswith("image2"):
+            container.close()
+            raise BurstError(
+                f"{self.path}: a still image ({demuxer.removesuffix('_pipe')}), not a video; "
+                "to read images as a recording, put the frames in a folder"
+            )
         return container
 
     def _probe_video(self) -> tuple[float, int | None]:

@@ -181,3 +181,14 @@ def test_options_are_checked():
         Normalisation(gain="bright")
     with pytest.raises(ValueError, match="binning"):
         Normalisation(binning=0)
+
+
+@pytest.mark.parametrize("suffix", [".png", ".jpg"])
+def test_a_still_image_named_as_a_video_is_refused_by_name(tmp_path, suffix):
+    """FFmpeg opens a PNG or JPEG renamed .mp4 as a one-frame stream; lburst must say what it is."""
+    pytest.importorskip("av")
+    write_image(tmp_path / f"still{suffix}", np.zeros((32, 48, 3), np.uint8))
+    (tmp_path / "still.mp4").write_bytes((tmp_path / f"still{suffix}").read_bytes())
+    with pytest.raises(BurstError, match=r"still.mp4: a still image \((png|jpeg)\), not a video") as err:
+        list(open_recording(tmp_path / "still.mp4", RecordingOptions(burst=1, every=1)).bursts())
+    assert "\n" not in str(err.value)
