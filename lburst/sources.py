@@ -181,7 +181,7 @@ class Recording:
             self.indices = self._file_indices()
             self.frame_count = self.indices[-1] + 1
         self.gain: float | None = None  # set by bursts() from the first burst of linear frames
-        self.frames_read, self.read_seconds = 0, 0.0
+        self.frames_read, self.read_seconds, self.last_index = 0, 0.0, -1
 
     @property
     def camera(self) -> dict | None:
@@ -246,6 +246,7 @@ class Recording:
             if frame is None:
                 return
             self.frames_read += 1
+            self.last_index = frame.index
             yield frame
 
     def _folder_frames(self) -> Iterator[Frame]:
@@ -285,10 +286,18 @@ class Recording:
 
     def bursts(self) -> Iterator[tuple[Keyframe, np.ndarray]]:
         """``(keyframe, burst (N, H, W, 3))`` in temporal order (module docstring); the burst is
-        normalised (uint8) when the frames are linear 16-bit and the normalisation asks for it."""
-        if self.options.motion is not None:
-            yield from self._motion_bursts(self.options.motion)
-            return
+        normalised (uint8) when the frames are linear 16-bit and the normalisation asks for it.
+        A ``start`` past the last frame is an error that names both."""
+        emitted = 0
+        for item in self._motion_bursts(self.options.motion) if self.options.motion is not None else self._bursts():
+            emitted += 1
+            yield item
+        if not emitted and self.frames_read and self.options.start > self.last_index:
+            raise BurstError(
+                f"{self.path}: --start {self.options.start} is past the last frame ({self.last_index}) of the recording"
+            )
+
+    def _bursts(self) -> Iterator[tuple[Keyframe, np.ndarray]]:
         o = self.options
         half = o.burst // 2
         buffer: dict[int, Frame] = {}

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from lburst.io import BurstError, write_image
+from lburst.keyframes import MotionGate
 from lburst.raw import Normalisation
 from lburst.sources import Keyframe, RecordingOptions, is_recording, open_recording
 
@@ -192,3 +193,15 @@ def test_a_still_image_named_as_a_video_is_refused_by_name(tmp_path, suffix):
     with pytest.raises(BurstError, match=r"still.mp4: a still image \((png|jpeg)\), not a video") as err:
         list(open_recording(tmp_path / "still.mp4", RecordingOptions(burst=1, every=1)).bursts())
     assert "\n" not in str(err.value)
+
+
+def test_a_start_past_the_last_frame_is_an_error_naming_both(tmp_path):
+    pytest.importorskip("av")
+    video = _video(tmp_path / "v.mp4")  # 40 frames
+    assert [k.index for k, _ in open_recording(video, RecordingOptions(burst=5, every=8, start=39)).bursts()] == [39]
+    for options in (
+        RecordingOptions(burst=5, every=8, start=40),
+        RecordingOptions(burst=5, motion=MotionGate(0.1), start=100),
+    ):
+        with pytest.raises(BurstError, match=r"v.mp4: --start \d+ is past the last frame \(39\)"):
+            list(open_recording(video, options).bursts())

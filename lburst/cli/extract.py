@@ -213,7 +213,7 @@ def main(args: argparse.Namespace) -> int:
             name, target, computed = extract_burst(path, extractor, args, method, names)
         except (BurstError, ValueError, OSError, RuntimeError) as exc:
             failed.append((path, str(exc)))
-            tqdm.write(f"skipped {path}: {exc}", file=sys.stderr)
+            tqdm.write(f"skipped {exc if str(exc).startswith(str(path)) else f'{path}: {exc}'}", file=sys.stderr)
             continue
         finished.append((name, target))
         done += computed
@@ -224,5 +224,5 @@ def main(args: argparse.Namespace) -> int:
         f"{len(failed)} failed"
     )
     for path, why in failed:
-        print(f"  failed: {path}: {why}", file=sys.stderr)
+        print(f"  failed: {why if why.startswith(str(path)) else f'{path}: {why}'}", file=sys.stderr)
     return 1 if failed else 0
