@@ -133,6 +133,9 @@ def ground_truth_path(path: str | Path) -> Path:
 def frame_files(folder: Path) -> list[Path]:
     """The frame files of a recording folder (images and DNG), naturally sorted."""
     suffixes = IMAGE_SUFFIXES + RAW_SUFFIXES
+    for p in folder.iterdir():
+        if p.suffix.lower() in suffixes and p.is_symlink() and not p.exists():
+            raise BurstError(f"{p}: a broken link (its target is missing, or the link loops); fix or remove it")
     return sorted(
         (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in suffixes and not p.name.startswith(".")),
         key=lambda p: natural_key(p.name),

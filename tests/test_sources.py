@@ -205,3 +205,16 @@ def test_a_start_past_the_last_frame_is_an_error_naming_both(tmp_path):
     ):
         with pytest.raises(BurstError, match=r"v.mp4: --start \d+ is past the last frame \(39\)"):
             list(open_recording(video, options).bursts())
+
+
+@pytest.mark.parametrize("kind", ["dangling", "loop"])
+def test_a_broken_frame_link_is_named_not_dropped(tmp_path, kind):
+    folder = _folder(tmp_path, range(6))
+    link = folder / "f000006.png"
+    if kind == "dangling":
+        link.symlink_to(tmp_path / "gone.png")
+    else:
+        link.symlink_to(folder / "f000006.png")
+    with pytest.raises(BurstError, match=r"f000006.png: a broken link") as err:
+        open_recording(folder, RecordingOptions(burst=3, every=2))
+    assert "\n" not in str(err.value)
