@@ -5,7 +5,9 @@ consecutive frames (PNG/JPEG/TIFF, 8 or 16 bit, or DNG), sorted naturally.  Fram
 *indices* count frames from the start: for a video ``round((time - t0) * fps)`` from
 the frames' timestamps, for a folder the last number in each file name (so a gap in the
 numbering is a dropped frame), or the position when the names carry no distinct
-numbers.  Timestamps are the video's, or ``index / fps`` for a folder.
+numbers.  Timestamps are the video's, or ``index / fps`` for a folder.  Video frames are
+turned as the stream's rotation metadata (display matrix) says, as a player shows them; a
+camera in ``meta.json`` describes the frames so turned.
 
 Keyframes are frames ``start, start + every, start + 2 every, ...``, or, with
 ``motion``, the frames from ``start`` on where the view has moved that fraction of the
@@ -128,6 +130,14 @@ def meta_path(path: str | Path) -> Path:
 
 def ground_truth_path(path: str | Path) -> Path:
     return _sidecar(Path(path), "gt.txt")
+
+
+def _as_displayed(frame) -> np.ndarray:
+    """A decoded video frame (RGB) turned as its stream's display matrix says (phone videos
+    shot upright are stored on their side), so that frames are what a player shows."""
+    image = frame.to_ndarray(format="rgb24")
+    turns = int(round((getattr(frame, "rotation", 0) or 0) / 90)) % 4
+    return np.ascontiguousarray(np.rot90(image, turns)) if turns else image
 
 
 def frame_files(folder: Path) -> list[Path]:
@@ -273,7 +283,7 @@ class Recording:
                         index = last + 1
                     last = index
                     decoded += 1
-                    yield Frame(index, stamp, frame.to_ndarray(format="rgb24"), str(self.path))
+                    yield Frame(index, stamp, _as_displayed(frame), str(self.path))
             except av.FFmpegError as err:
                 raise BurstError(
                     f"{self.path}: decoding stopped after {decoded} frames ({err}); the file is truncated or corrupt"

@@ -218,3 +218,25 @@ def test_a_broken_frame_link_is_named_not_dropped(tmp_path, kind):
     with pytest.raises(BurstError, match=r"f000006.png: a broken link") as err:
         open_recording(folder, RecordingOptions(burst=3, every=2))
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("rotation", [90, -90, 180])
+def test_video_rotation_metadata_turns_frames_as_a_player_shows_them(tmp_path, rotation):
+    av = pytest.importorskip("av")
+    path = tmp_path / "phone.mp4"
+    image = np.zeros((32, 64, 3), np.uint8)
+    image[:8, :8] = 255  # a white corner, top left as stored
+    with av.open(str(path), "w") as out:
+        stream = out.add_stream("libx264", rate=10)
+        stream.width, stream.height, stream.pix_fmt = 64, 32, "yuv420p"
+        stream.set_display_rotation(rotation)
+        for _ in range(5):
+            for packet in stream.encode(av.VideoFrame.from_ndarray(image, format="rgb24")):
+                out.mux(packet)
+        for packet in stream.encode():
+            out.mux(packet)
+    (_, burst), *_ = open_recording(path, RecordingOptions(burst=3, every=2)).bursts()
+    expected = np.rot90(image, rotation // 90)  # counter-clockwise by the display angle
+    assert burst.shape[1:3] == expected.shape[:2]
+    corner = np.unravel_index(np.argmax(expected[..., 0]), expected.shape[:2])
+    assert burst[1][corner].mean() > 200 and burst[1].mean() < 80
