@@ -76,3 +76,29 @@ def test_malformed_file_names_file_and_problem(tmp_path, text, problem):
     with pytest.raises(ValueError, match=problem) as err:
         Reference.load(path)
     assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "edit, problem",
+    [
+        (lambda d: d["images"]["0000"].update(t=[float("nan"), 0, 0]), "must be finite"),
+        (lambda d: d["images"]["0001"].update(R=[[float("inf"), 0, 0], [0, 1, 0], [0, 0, 1]]), "must be finite"),
+        (lambda d: d["images"]["0000"].update(R=[[2, 0, 0], [0, 1, 0], [0, 0, 1]]), "not a rotation"),
+        (lambda d: d["images"]["0000"].update(R=[[-1, 0, 0], [0, 1, 0], [0, 0, 1]]), "not a rotation"),
+        (lambda d: d["camera"].update(params=[float("nan"), 50, 32, 24]), "camera.params must be finite"),
+        (lambda d: d["camera"].update(params=[0, 50, 32, 24]), "positive focal"),
+        (lambda d: d["camera"].update(width=0), "camera.width must be a positive integer"),
+        (lambda d: d["camera"].update(height=4.5), "camera.height must be a positive integer"),
+        (lambda d: d.update(length=float("inf")), "length must be a positive number"),
+        (lambda d: d.update(length=-1), "length must be a positive number"),
+    ],
+)
+def test_unusable_ground_truth_is_refused_by_file(tmp_path, edit, problem):
+    path = tmp_path / "reference.json"
+    make_reference().save(path)
+    data = json.loads(path.read_text())
+    edit(data)
+    path.write_text(json.dumps(data))  # json writes NaN and Infinity, and Python reads them back
+    with pytest.raises(ValueError, match=problem) as err:
+        Reference.load(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)

@@ -103,14 +103,26 @@ class Reference:
                 raise KeyError(f"camera.{key}")
         if len(camera["params"]) < 4:
             raise ValueError(f"camera.params needs at least 4 values, got {camera['params']}")
+        for key in ("width", "height"):
+            if isinstance(camera[key], bool) or not isinstance(camera[key], int) or camera[key] < 1:
+                raise ValueError(f"camera.{key} must be a positive integer, got {camera[key]!r}")
+        params = np.asarray(camera["params"], dtype=np.float64)
+        if not np.all(np.isfinite(params)) or params[0] <= 0:
+            raise ValueError(f"camera.params must be finite with a positive focal length, got {camera['params']}")
         poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for name, pose in data["images"].items():
             R = np.asarray(pose["R"], dtype=np.float64)
             t = np.asarray(pose["t"], dtype=np.float64)
             if R.shape != (3, 3) or t.shape != (3,):
                 raise ValueError(f"image {name!r}: R must be 3x3 and t length 3, got {R.shape} and {t.shape}")
+            if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+                raise ValueError(f"image {name!r}: R and t must be finite (no NaN or inf)")
+            if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
+                raise ValueError(f"image {name!r}: R is not a rotation (orthonormal, determinant +1)")
             poses[name] = (R, t)
         length = data.get("length")
+        if length is not None and (isinstance(length, bool) or not np.isfinite(float(length)) or float(length) <= 0):
+            raise ValueError(f"length must be a positive number of metres, got {length!r}")
         return cls(
             source=str(data["source"]),
             camera=dict(camera),
