@@ -121,3 +121,22 @@ def test_loss_weights_given_on_the_command_line_reach_the_config(tmp_path):
     cfg = config_from_args(parser.parse_args(args))
     assert (cfg.ap_weight, cfg.rel_base, cfg.spread_weight) == (1.0, 0.3, 2.0)
     assert config_from_args(parser.parse_args(["--out", str(tmp_path), "--preset", "aligned"])).ap_weight == 0.25
+
+
+def test_max_rotation_sets_the_pairs_and_a_resumed_run_keeps_its_own(tmp_path):
+    from lburst.cli.train import _check_resumed_pairs
+
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    cfg = config_from_args(
+        parser.parse_args(["--out", str(tmp_path / "new"), "--preset", "lite", "--max-rotation", "180"])
+    )
+    assert cfg.pair.max_rotation_deg == 180 and cfg.pair.crop == TrainConfig().pair.crop
+    assert config_from_args(parser.parse_args(["--out", str(tmp_path / "new")])).pair.max_rotation_deg == 15
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--out", str(tmp_path), "--max-rotation", "nan"])
+    (tmp_path / "config.json").write_text(json.dumps({"pair": {"max_rotation_deg": 15.0}}))
+    with pytest.raises(ValueError, match=r"leave out --max-rotation 180 \(the run has 15\)"):
+        _check_resumed_pairs(tmp_path, 180.0)
+    _check_resumed_pairs(tmp_path, 15.0)
+    _check_resumed_pairs(tmp_path, None)

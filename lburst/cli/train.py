@@ -4,8 +4,10 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from dataclasses import fields, replace
+from pathlib import Path
 
 from lburst.cli.numbers import integer, real
 from lburst.model.network import AUTOCAST_DTYPES
@@ -66,6 +68,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)",
     )
     p.add_argument(
+        "--max-rotation",
+        type=real(0, 180),
+        metavar="DEG",
+        help="largest in-plane rotation between the two bursts of a training pair (presets: 15); "
+        "180 trains descriptors to match views turned any way",
+    )
+    p.add_argument(
         "--spread-weight",
         type=real(0),
         help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)",
@@ -116,6 +125,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     overrides = given_options(args)
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
+    if getattr(args, "max_rotation", None) is not None:
+        cfg = replace(cfg, pair=replace(cfg.pair, max_rotation_deg=args.max_rotation))
     if args.frames is not None:
         cfg = replace(cfg, pair=replace(cfg.pair, frames=args.frames))
     elif cfg.pair.frames != cfg.frames:
@@ -127,11 +138,24 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     return cfg
 
 
+def _check_resumed_pairs(out: Path, max_rotation: float | None) -> None:
+    """``ValueError`` when ``--max-rotation`` differs from the resumed run's own (which it keeps)."""
+    try:
+        saved = json.loads((Path(out) / "config.json").read_text())["pair"]["max_rotation_deg"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    if max_rotation is not None and max_rotation != saved:
+        raise ValueError(
+            f"{out}: a resumed run keeps its own settings; leave out --max-rotation {max_rotation:g} (the run has {saved:g})"
+        )
+
+
 def main(args: argparse.Namespace) -> int:
     data = args.data or [str(shared_dir() / "data" / "train")]
     cfg = config_from_args(args)
     if args.resume:
         check_resume_options(args.out, given_options(args))
+        _check_resumed_pairs(args.out, args.max_rotation)
     last = train(
         data,
         args.out,
