@@ -131,3 +131,27 @@ def test_lburst_methods_lists_every_method_and_matcher_with_defaults(capsys):
     only = capsys.readouterr().out
     assert "root=false  (bool)" in only and "buff" not in only
     assert main(["methods", "nope"]) == 2
+
+
+def test_a_checkpoint_path_with_commas_loads_and_keeps_its_options(tmp_path):
+    import shutil
+
+    from lburst.methods import create, parse_spec
+    from lburst.weights import weights_path
+
+    folder = tmp_path / "run,2"
+    folder.mkdir()
+    shutil.copy(weights_path("lburst-b5-lite"), folder / "w,1.pt")
+    spec = f"lburst-lite:{folder / 'w,1.pt'},top_k=7,runtime=torch"
+    assert parse_spec(spec).arg == str(folder / "w,1.pt")
+    burst = np.random.default_rng(0).integers(0, 255, (5, 64, 80, 3), dtype=np.uint8)
+    assert len(create(spec)(burst)["keypoints"]) <= 7
+    with pytest.raises(ValueError, match="bad option 'w.pt'"):
+        parse_spec("lburst,w.pt")  # no checkpoint given: a bare word is still a bad option
+
+
+def test_shipped_names_work_where_a_checkpoint_file_is_expected(tmp_path):
+    from lburst.cli import main
+
+    assert main(["export", "onnx", "lburst-b5-lite", "--out", str(tmp_path / "lite.onnx")]) == 0
+    assert (tmp_path / "lite.onnx").stat().st_size > 100_000

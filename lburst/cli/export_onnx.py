@@ -12,16 +12,20 @@ from lburst.cli.numbers import integer
 from lburst.model.network import CheckpointError, load_checkpoint
 from lburst.model.onnx import OnnxRunner, export_onnx
 from lburst.model.runtimes import inference_form
+from lburst.weights import resolve_weights
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("checkpoint", help="checkpoint to export (lburst or published layout)")
+    p.add_argument(
+        "checkpoint", help="checkpoint to export (lburst or published layout), or a shipped name such as lburst-b5"
+    )
     p.add_argument("--out", type=Path, required=True, help="ONNX file to write")
     p.add_argument("--opset", type=integer(11, 30), default=18)
     p.add_argument("--check", action="store_true", help="compare ONNX Runtime with torch on a random burst")
 
 
 def main(args: argparse.Namespace) -> int:
+    args.checkpoint = resolve_weights(args.checkpoint)
     try:
         out = export_onnx(args.checkpoint, args.out, args.opset)
     except CheckpointError as exc:

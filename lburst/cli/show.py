@@ -38,7 +38,9 @@ def load_model(weights: str | None, frame_order: str = "temporal", device: str |
 
     weights = weights or os.environ.get("LBURST_WEIGHTS")
     if weights:
-        return LBurst.from_checkpoint(weights, device=device, frame_order=frame_order)
+        from lburst.weights import resolve_weights
+
+        return LBurst.from_checkpoint(resolve_weights(weights), device=device, frame_order=frame_order)
     return LBurst.pretrained("lburst-b5", device=device)
 
 

@@ -11,7 +11,8 @@ Methods are created from a *spec* string::
     WRAPPER[,KEY=VALUE...]+SPEC      a method that wraps the extractor of SPEC
 
 ``NAME`` picks a method from the registry, ``ARG`` is its positional argument (a
-checkpoint path for learned methods) and ``KEY=VALUE`` pairs are its options.  Each
+checkpoint path for learned methods; it may hold commas: it runs to the first
+``,KEY=`` with KEY a name) and ``KEY=VALUE`` pairs are its options.  Each
 method declares its options as a dataclass (:func:`register`); :func:`create` converts
 and checks them in one place (:func:`lburst.methods.options.parse_options`), and an
 error lists the valid options with their types and defaults.  A wrapper such as
@@ -128,9 +129,14 @@ class Spec:
     inner: Spec | None = None
 
 
+_OPTION = re.compile(r"\s*[A-Za-z_]\w*\s*=")
+
+
 def _split(head: str, spec: str) -> tuple[str, str | None, dict[str, str]]:
     first, *pairs = head.split(",")
     name, colon, arg = first.partition(":")
+    while colon and pairs and not _OPTION.match(pairs[0]):  # a comma inside the checkpoint path
+        arg += "," + pairs.pop(0)
     if colon and not arg.strip():
         raise ValueError(
             f"method spec {spec!r}: nothing after {name.strip() + ':'!r} (a checkpoint file or a shipped name)"
