@@ -60,3 +60,16 @@ def test_global_mapper_registers_the_flight(flight, tmp_path):
     )
     assert result.error is None and result.registered == result.names
     assert result.metrics["ate_percent"] < 1.0
+
+
+def test_the_command_line_names_the_folder_pycolmap_opens(flight, tmp_path, capsys):
+    import re
+
+    import pycolmap
+
+    from lburst.cli import main
+
+    out = tmp_path / "cli"
+    assert main(["reconstruct", str(flight), "--method", "sift,max_features=1500", "--out", str(out)]) == 0
+    folder = re.search(r"model in (\S+)", capsys.readouterr().out).group(1)
+    assert pycolmap.Reconstruction(folder).num_reg_images() == 5

@@ -136,7 +136,10 @@ def main(args: argparse.Namespace) -> int:
     if not result.converged:
         print(f"lburst reconstruct: no model: COLMAP registered no images of {args.scene}", file=sys.stderr)
         return 1
-    print(f"{len(result.registered)}/{len(result.names)} images registered; model in {Path(args.out) / 'colmap'}")
+    model = Path(args.out) / "colmap" / "model"
+    print(
+        f"{len(result.registered)}/{len(result.names)} images registered; model in {model} (pycolmap.Reconstruction opens it)"
+    )
     if result.source_error:
         print(
             f"lburst reconstruct: {result.source_error} (the {len(result.names)} keyframes before it were used)",
