@@ -73,7 +73,11 @@ def run_child(path: str, args: argparse.Namespace) -> dict:
         model = LBurst(LBurstNet(NetConfig(frames=5)), device=device)
     burst = np.load(args.burst_file, mmap_mode="r") if args.burst_file else _make_burst((args.height, args.width), 5)
     burst = np.ascontiguousarray(burst[: model.frames] if model.frames < 5 else burst)
-    options = {} if path in USER_PATHS else {"fast": path != "plain", "precision": "bf16" if path == "bf16" else "fp32"}
+    options = (
+        {"rotations": args.rotations}
+        if path in USER_PATHS
+        else {"fast": path != "plain", "precision": "bf16" if path == "bf16" else "fp32"}
+    )
     if path == "plain":
         model.net.to(memory_format=torch.contiguous_format)
     reference_model = model
@@ -142,6 +146,13 @@ def main() -> int:
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--batch", type=int, default=1, help="bursts per call (extract_batch); times are per burst")
     p.add_argument("--top-k", type=int, default=4000)
+    p.add_argument(
+        "--rotations",
+        type=int,
+        default=1,
+        choices=(1, 2, 4),
+        help="the user paths also extract at 180 (2) or every 90 (4) degrees",
+    )
     p.add_argument("--threads", type=int, default=torch.get_num_threads())
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--out", type=Path, help="JSON results")

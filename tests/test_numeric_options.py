@@ -153,3 +153,36 @@ def test_the_homography_reader_accepts_exactly_the_finite_invertible_matrices(va
     else:
         with pytest.raises(ValueError, match=r"^H1to2p: homography (holds NaN or inf|is singular)"):
             check_homography(h, "H1to2p")
+
+
+@settings(max_examples=EXAMPLES, deadline=None)
+@given(
+    st.lists(st.floats(-2, 2, allow_nan=False, width=64), min_size=3, max_size=3),
+    st.sampled_from(["rotation", "scaled", "mirrored", "nan", "inf"]),
+    st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=3, max_size=3),
+    st.floats(allow_nan=True, allow_infinity=True, width=64),
+)
+def test_the_reference_reader_accepts_exactly_finite_rotations_and_positive_focal_lengths(
+    tmp_path_factory, angles, kind, t, focal
+):
+    import json
+
+    from scipy.spatial.transform import Rotation
+
+    from lburst.scenes.reference import Reference
+
+    R = Rotation.from_rotvec(angles).as_matrix()
+    R = {"scaled": 1.5 * R, "mirrored": -R, "nan": R + np.nan, "inf": R + np.inf}.get(kind, R)
+    data = {
+        "source": "test",
+        "camera": {"model": "PINHOLE", "width": 64, "height": 48, "params": [focal, focal, 32.0, 24.0]},
+        "images": {"0000": {"R": R.tolist(), "t": t}},
+    }
+    path = tmp_path_factory.mktemp("ref") / "reference.json"
+    path.write_text(json.dumps(data))
+    usable = kind == "rotation" and all(math.isfinite(v) for v in t) and math.isfinite(focal) and focal > 0
+    if usable:
+        assert np.allclose(Reference.load(path).poses["0000"][0], R)
+    else:
+        with pytest.raises(ValueError, match=re.escape(str(path))):
+            Reference.load(path)
