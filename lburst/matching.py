@@ -15,8 +15,8 @@ against the matcher's options dataclass (:func:`lburst.methods.options.parse_opt
   ``ratio`` (default 0.8), kept only when mutual unless ``mutual=false``; these are
   kornia's ``match_smnn`` and ``match_snn``.
 
-Features extracted at several rotations (``rotations`` (K,): the quarter turns of the
-burst that each keypoint was found in, :meth:`lburst.LBurst.extract`) are matched set
+Features extracted at several rotations (``rotations`` (K,): the degrees by which the
+burst that each keypoint was found in was turned, :meth:`lburst.LBurst.extract`) are matched set
 against set: the upright set of ``a`` against each set of ``b`` (or each set of ``a``
 against ``b`` when only ``a`` has them), keeping the pair of sets with the most matches;
 the indices still refer to the whole features.  So two views turned by 90 or 180 degrees
@@ -99,7 +99,9 @@ def create(spec: str = DEFAULT) -> Matcher:
 
 def by_rotation(match: Callable[[np.ndarray, np.ndarray], np.ndarray], a: Features, b: Features) -> np.ndarray:
     """``match(descriptors_a, descriptors_b)`` through the rotation sets of ``a`` and ``b``
-    (see the module docstring); without them, ``match`` of all descriptors."""
+    (see the module docstring); without them, ``match`` of all descriptors.  The pair of
+    sets is the one with the most distinctive mutual matches (:func:`distinctive_matches`),
+    which, unlike a plain count, does not favour the set with more keypoints."""
     ra, rb = a.get("rotations"), b.get("rotations")
     if ra is None and rb is None:
         return match(a["descriptors"], b["descriptors"])
@@ -109,12 +111,28 @@ def by_rotation(match: Callable[[np.ndarray, np.ndarray], np.ndarray], a: Featur
         pairs = [(fixed, np.flatnonzero(rb == turn)) for turn in np.unique(rb)]
     else:
         pairs = [(np.flatnonzero(ra == turn), everything_b) for turn in np.unique(ra)]
-    best = np.zeros((0, 2), np.int64)
-    for ia, ib in pairs:
-        found = match(a["descriptors"][ia], b["descriptors"][ib])
-        if len(found) > len(best):
-            best = np.stack([ia[found[:, 0]], ib[found[:, 1]]], 1).astype(np.int64)
-    return best
+    if not pairs:
+        return np.zeros((0, 2), np.int64)
+    ia, ib = max(pairs, key=lambda p: distinctive_matches(a["descriptors"][p[0]], b["descriptors"][p[1]]))
+    found = match(a["descriptors"][ia], b["descriptors"][ib])
+    return np.stack([ia[found[:, 0]], ib[found[:, 1]]], 1).astype(np.int64).reshape(-1, 2)
+
+
+def distinctive_matches(da: np.ndarray, db: np.ndarray, ratio: float = 0.9) -> int:
+    """Mutual nearest neighbours whose nearest distance is at most ``ratio`` times the
+    second nearest: how much two descriptor sets agree."""
+    import torch
+
+    from lburst.match import _distances, check_descriptors
+
+    check_descriptors(da, db)
+    if len(da) < 2 or len(db) < 2:
+        return 0
+    ta, tb = _tensors(da, db, "cpu")
+    dist = _distances(ta, tb, da.dtype == np.uint8).clamp_min(0)
+    values, index = torch.topk(dist, 2, dim=1, largest=False)
+    mutual = dist.argmin(0)[index[:, 0]] == torch.arange(len(ta))
+    return int((mutual & (values[:, 0] <= ratio * values[:, 1])).sum())
 
 
 def _tensors(a: np.ndarray, b: np.ndarray, device: str):

@@ -40,14 +40,20 @@ def rotation_map(deg: float, shape: tuple[int, ...]) -> tuple[np.ndarray, tuple[
     return m, (new_h, new_w)
 
 
-def rotate_image(image: np.ndarray, deg: float) -> tuple[np.ndarray, np.ndarray]:
+def rotate_image(image: np.ndarray, deg: float, reflect: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``image`` (H, W[, C]) turned by ``deg`` and the 3x3 pixel map from ``image`` to it.
-    Quarter turns are exact; other angles are bilinear, with black corners."""
+    Quarter turns are exact; other angles are bilinear, with black corners (or, with
+    ``reflect``, the image mirrored into them, which makes no false edges)."""
     m, (new_h, new_w) = rotation_map(deg, image.shape)
     if float(deg) % 90 == 0:
         return np.ascontiguousarray(np.rot90(image, int(round(float(deg) / 90)) % 4)), m
     turned = cv2.warpAffine(
-        image, m[:2], (new_w, new_h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0
+        image,
+        m[:2],
+        (new_w, new_h),
+        flags=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REFLECT_101 if reflect else cv2.BORDER_CONSTANT,
+        borderValue=0,
     )
     return turned, m
 

@@ -88,7 +88,8 @@ def summarize(summary: dict, t: np.ndarray) -> dict:
             }
         )
     out["by_scale"] = []
-    for s in np.unique(np.round(scale[np.isfinite(scale)], 1)):
+    levels = np.unique(np.round(scale[np.isfinite(scale)], 1))
+    for s in levels if len(levels) <= 16 else []:  # pyramid levels of a learned detector, not SIFT's continuous scales
         sel = np.isclose(scale, s, atol=0.05)
         out["by_scale"].append({"scale": float(s), "share": float(sel.mean()), "mean_error": float(error[sel].mean())})
     return out
@@ -115,7 +116,7 @@ def main() -> None:
             f"{s['cells_covered']:.2f} | {s['mean_error']:.3f} | {radial} | {err} |"
         )
     print()
-    for name, s in results.items():
+    for name, s in ((n, s) for n, s in results.items() if s["by_scale"]):
         levels = ", ".join(f"{b['scale']:.0f}: {b['mean_error']:.2f} ({b['share']:.2f})" for b in s["by_scale"])
         print(f"{name} error by keypoint scale (share): {levels}")
     if args.out:

@@ -100,13 +100,13 @@ def _burst():
 def test_each_rotation_set_is_the_extraction_of_the_turned_burst_mapped_back(lite):
     burst = _burst()
     both = lite.extract(burst, top_k=500, rotations=2)
-    assert set(np.unique(both["rotations"])) == {0, 2}
+    assert set(np.unique(both["rotations"])) == {0, 180}
     upright = lite.extract(burst, top_k=500)
     first = both["rotations"] == 0
     assert np.array_equal(both["keypoints"][first], upright["keypoints"])
     turned = lite.extract(turn_burst(burst, 2), top_k=500)
     half, _ = rotation_map(180, burst.shape[1:3])
-    back = both["rotations"] == 2
+    back = both["rotations"] == 180
     assert np.allclose(map_points(both["keypoints"][back], half), turned["keypoints"], atol=1e-3)
     assert np.array_equal(both["descriptors"][back], turned["descriptors"])
     with pytest.raises(ValueError, match="rotations"):
@@ -127,5 +127,29 @@ def test_views_turned_by_180_match_through_the_rotation_sets(lite):
 
 def test_method_spec_takes_rotations_and_refuses_others():
     assert create_method("lburst-lite,rotations=4,runtime=torch").rotations == 4
-    with pytest.raises(ValueError, match="rotations must be one of 1, 2, 4"):
+    with pytest.raises(ValueError, match="rotations must be one of 1, 2, 4, 8"):
         create_method("lburst-lite,rotations=3")
+
+
+def test_views_turned_by_45_degrees_match_through_eight_rotation_sets(lite):
+    burst = _burst()
+    turned = np.stack([rotate_image(frame, 45, reflect=True)[0] for frame in burst])
+    to_turned, _ = rotation_map(45, burst.shape[1:3])
+    a = lite.extract(burst, top_k=500)
+    b = lite.extract(turned, top_k=500, rotations=8)
+    assert set(np.unique(b["rotations"])) == set(range(0, 360, 45))
+    x, y = b["keypoints"].T
+    h, w = turned.shape[1:3]
+    assert (x >= -0.5).all() and (x <= w - 0.5).all() and (y >= -0.5).all() and (y <= h - 0.5).all()
+
+    def correct(matches, fa, fb):
+        e = np.linalg.norm(
+            map_points(fa["keypoints"][matches[:, 0]], to_turned) - fb["keypoints"][matches[:, 1]], axis=1
+        )
+        return int((e < 2).sum()), float(np.mean(e < 2)) if len(e) else 0.0
+
+    found, share = correct(create("mnn")(a, b), a, b)
+    assert found > 50 and share > 0.6  # turned twice (45 and back), bilinear both times
+    upright = lite.extract(turned, top_k=500)
+    plain, _ = correct(create("mnn")(a, upright), a, upright)
+    assert plain < found / 3

@@ -68,7 +68,7 @@ class LearnedOptions:
         if self.rotations not in ROTATIONS:
             raise ValueError(
                 f"rotations must be one of {', '.join(map(str, ROTATIONS))} (views turned by 0; 0 and 180; "
-                f"every 90 degrees), got {self.rotations!r}"
+                f"every 90; every 45 degrees), got {self.rotations!r}"
             )
         if self.runtime is not None and self.runtime != "auto" and self.runtime not in RUNTIMES:
             raise ValueError(f"unknown runtime {self.runtime!r}: use auto or one of {', '.join(RUNTIMES)}")

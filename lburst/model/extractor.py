@@ -35,7 +35,7 @@ from lburst.model.network import (
 )
 from lburst.model.runtimes import choose_runtime, inference_form, make_runner
 
-ROTATIONS = (1, 2, 4)  # extraction at 0; 0 and 180; or every quarter turn (LBurst.extract)
+ROTATIONS = (1, 2, 4, 8)  # extraction at 0; 0 and 180; every quarter turn; every 45 degrees (LBurst.extract)
 
 
 @dataclass(frozen=True)
@@ -452,11 +452,12 @@ class LBurst:
         published), ``scores`` (K,) = reliability x repeatability, and
         ``descriptors`` (K, 128) float32, L2-normalised.
 
-        ``rotations`` 2 or 4 also extracts from the burst turned by 180 degrees (2) or by
-        each quarter turn (4), up to ``top_k`` keypoints each, mapped back to the burst's
-        pixels; ``rotations`` (K,) uint8 then says by how many quarter turns
-        (counter-clockwise) each keypoint's burst was turned, and the features are sorted
-        by it, then by score.  Matchers match views rotated against each other through
+        ``rotations`` 2, 4 or 8 also extracts from the burst turned by 180 degrees (2), by
+        each quarter turn (4) or every 45 degrees (8; the odd ones bilinear, with reflected
+        borders), up to ``top_k`` keypoints each, mapped back to the burst's pixels (those
+        that fall outside are dropped); ``rotations`` (K,) uint16 then says by how many
+        degrees (counter-clockwise) each keypoint's burst was turned, and the features are
+        sorted by it, then by score.  Matchers match views rotated against each other through
         these sets (:mod:`lburst.matching`): the cost of extraction grows ``rotations``-fold.
         """
         if rotations != 1:
@@ -468,17 +469,27 @@ class LBurst:
         return self._extract(x, cfg, self._full_size(burst), scale)
 
     def _extract_turned(self, burst: np.ndarray, top_k: int | None, rotations: int, **options) -> Features:
-        from lburst.rotation import map_points, rotation_map, turn_burst
+        from lburst.rotation import map_points, rotate_image, rotation_map, turn_burst
 
         if rotations not in ROTATIONS:
             raise ValueError(f"rotations must be one of {ROTATIONS}, got {rotations!r}")
         burst = np.asarray(burst)
+        height, width = burst.shape[1:3]
         parts = []
-        for turns in range(0, 4, 4 // rotations):
-            feats = self.extract(turn_burst(burst, turns), top_k, **options)
-            to_turned, _ = rotation_map(90 * turns, burst.shape[1:3])
+        for step in range(rotations):
+            deg = 360 * step // rotations
+            if deg % 90 == 0:
+                turned = turn_burst(burst, deg // 90)
+                to_turned, _ = rotation_map(deg, burst.shape[1:3])
+            else:  # bilinear on the turned image's bounding box; reflected borders make no false edges
+                turned = np.stack([rotate_image(frame, deg, reflect=True)[0] for frame in burst])
+                to_turned, _ = rotation_map(deg, burst.shape[1:3])
+            feats = self.extract(turned, top_k if deg % 90 == 0 else None, **options)
             feats["keypoints"] = map_points(feats["keypoints"], np.linalg.inv(to_turned))
-            feats["rotations"] = np.full(len(feats["keypoints"]), turns, np.uint8)
+            x, y = feats["keypoints"].T
+            inside = np.flatnonzero((x >= -0.5) & (x <= width - 0.5) & (y >= -0.5) & (y <= height - 0.5))
+            feats = {key: value[inside[:top_k]] for key, value in feats.items()}  # by score, as extracted
+            feats["rotations"] = np.full(len(feats["keypoints"]), deg, np.uint16)
             parts.append(feats)
         return {key: np.concatenate([f[key] for f in parts]) for key in parts[0]}
 
