@@ -68,3 +68,28 @@ def empty_features(dim: int = 128, binary: bool = False) -> Features:
         "scores": np.zeros(0, np.float32),
         "descriptors": np.zeros((0, dim), np.uint8 if binary else np.float32),
     }
+
+
+def spread_top_k(features: Features, top_k: int, image_size: tuple[int, int], cells: int) -> Features:
+    """The ``top_k`` keypoints of ``features`` spread over the image: first the best
+    ``top_k // cells**2`` of each cell of a ``cells`` x ``cells`` grid over ``image_size``
+    (W, H), then the best of the rest, all sorted by decreasing score.  A detector whose
+    scores fade towards the borders leaves the periphery of the image nearly empty under
+    a plain top-k; a camera model fitted to such keypoints is free to bend there."""
+    k = len(features["scores"])
+    if k <= top_k:
+        return features
+    order = np.argsort(-features["scores"], kind="stable")
+    width, height = image_size
+    x, y = features["keypoints"][order].T
+    cell = np.clip((x + 0.5) * cells / width, 0, cells - 1).astype(int) * cells + np.clip(
+        (y + 0.5) * cells / height, 0, cells - 1
+    ).astype(int)
+    rank = np.empty(k, np.int64)  # rank of each keypoint within its cell, by score
+    by_cell = np.argsort(cell, kind="stable")
+    starts = np.searchsorted(cell[by_cell], cell[by_cell], side="left")
+    rank[by_cell] = np.arange(k) - starts
+    first = rank < top_k // cells**2
+    chosen = np.concatenate([np.flatnonzero(first), np.flatnonzero(~first)])[:top_k]
+    keep = order[np.sort(chosen)]  # back in score order
+    return {key: value[keep] for key, value in features.items()}

@@ -43,7 +43,8 @@ class LearnedOptions:
     """Options of a learned method: loading (``frame_order``, ``device``, ``runtime``: one of
     :data:`lburst.model.runtimes.RUNTIMES` or ``auto``, by default ``auto`` for the light
     network and ``torch`` for the others, see :meth:`lburst.LBurst.from_checkpoint`), how many
-    keypoints (``top_k``; ``none``: all), ``rotations`` (1, 2 or 4: also extract from the burst
+    keypoints (``top_k``; ``none``: all), ``spread`` (N > 0: the top-k spread over an N x N
+    grid, :func:`lburst.features.spread_top_k`), ``rotations`` (1, 2 or 4: also extract from the burst
     turned by 180 degrees or by every quarter turn, so that views rotated against each other
     match; see :meth:`lburst.LBurst.extract`) and the :class:`lburst.model.extractor.MultiScaleConfig`
     fields below (the paper's defaults)."""
@@ -62,9 +63,12 @@ class LearnedOptions:
     precision: str = MultiScaleConfig.precision
     whiten: bool = MultiScaleConfig.whiten
     rotations: int = 1
+    spread: int = 0
 
     def __post_init__(self) -> None:
         autocast_dtype(self.precision)  # a clear error for an unknown precision
+        if isinstance(self.spread, bool) or not isinstance(self.spread, int) or not 0 <= self.spread <= 64:
+            raise ValueError(f"spread must be an integer 0-64 (cells per side; 0: plain top-k), got {self.spread!r}")
         if self.rotations not in ROTATIONS:
             raise ValueError(
                 f"rotations must be one of {', '.join(map(str, ROTATIONS))} (views turned by 0; 0 and 180; "
@@ -94,10 +98,11 @@ class LearnedOptions:
 class LearnedExtractor:
     """Wraps :class:`lburst.LBurst` in the extractor interface."""
 
-    def __init__(self, model: LBurst, top_k: int | None = 4000, rotations: int = 1, **options) -> None:
+    def __init__(self, model: LBurst, top_k: int | None = 4000, rotations: int = 1, spread: int = 0, **options) -> None:
         self.model = model
         self.top_k = top_k
         self.rotations = rotations
+        self.spread = spread
         self.options = options
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)  # ValueError now for a bad option, not per burst
         if cfg.whiten:
@@ -105,7 +110,19 @@ class LearnedExtractor:
         self.name = "lburst"
 
     def __call__(self, burst: np.ndarray) -> Features:
-        return self.model.extract(burst, top_k=self.top_k, rotations=self.rotations, **self.options)
+        if not self.spread or self.top_k is None:
+            return self.model.extract(burst, top_k=self.top_k, rotations=self.rotations, **self.options)
+        from lburst.features import spread_top_k
+
+        every = self.model.extract(burst, top_k=None, rotations=self.rotations, **self.options)
+        size = (burst.shape[2], burst.shape[1])
+        if "rotations" not in every:
+            return spread_top_k(every, self.top_k, size, self.spread)
+        sets = [
+            spread_top_k({k: v[every["rotations"] == turn] for k, v in every.items()}, self.top_k, size, self.spread)
+            for turn in np.unique(every["rotations"])
+        ]
+        return {k: np.concatenate([s[k] for s in sets]) for k in sets[0]}
 
 
 def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtractor:
@@ -118,7 +135,7 @@ def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtr
         if arg
         else LBurst.pretrained(default, device=options.device, runtime=options.runtime)
     )
-    return LearnedExtractor(model, options.top_k, options.rotations, **options.multiscale())
+    return LearnedExtractor(model, options.top_k, options.rotations, options.spread, **options.multiscale())
 
 
 def _weights(default: str):
