@@ -240,3 +240,16 @@ def test_video_rotation_metadata_turns_frames_as_a_player_shows_them(tmp_path, r
     assert burst.shape[1:3] == expected.shape[:2]
     corner = np.unravel_index(np.argmax(expected[..., 0]), expected.shape[:2])
     assert burst[1][corner].mean() > 200 and burst[1].mean() < 80
+
+
+def test_a_recording_that_fails_before_two_keyframes_still_writes_result_json(tmp_path, capsys):
+    import json
+
+    from lburst.cli import main
+
+    folder = _folder(tmp_path, range(12))
+    (folder / "img_0.png").write_bytes(b"\x89PNG not an image")
+    assert main(["reconstruct", str(folder), "--method", "sift", "--every", "4", "--out", str(tmp_path / "out")]) == 1
+    assert "img_0.png: not a readable image" in capsys.readouterr().err
+    result = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert "img_0.png" in result["source_error"] and "no model" in result["error"] and result["registered"] == []

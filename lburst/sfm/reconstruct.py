@@ -420,7 +420,16 @@ def reconstruct_scene(
     try:
         if is_recording(scene_dir):
             scene, features, shapes, source_error = recording_features(scene_dir, method_spec, out, opts, extractor)
-            if source_error and len(scene.items) < 2:
+            if source_error and len(scene.items) < 2:  # nothing to reconstruct: say why in result.json too
+                out.mkdir(parents=True, exist_ok=True)
+                ReconstructionResult(
+                    str(scene_dir),
+                    method_spec,
+                    str(out),
+                    scene.names,
+                    error=f"{len(scene.items)} keyframe(s) read before the recording stopped; no model",
+                    source_error=source_error,
+                ).save()
                 raise ReconstructionError(source_error)
         else:
             scene = list_scene(scene_dir)
