@@ -96,6 +96,51 @@ def test_reliability_loss_rewards_matching_descriptors_and_gradients_flow():
     assert ap_bad.item() < 0.5 and loss_bad.item() > loss_good.item()
 
 
+def test_the_reliability_loss_reaches_the_image_border_only_when_asked():
+    """APSampling.border: R2D2's 16 px leave the border's reliability untrained (why lburst-b5's
+    keypoints avoid the borders); 0 trains it wherever the target lies inside B."""
+    torch.manual_seed(3)
+    h = w = 64
+    desc = F.normalize(torch.randn(1, 8, h, w), dim=1)
+    flow, mask = _shift_flow(h, w, 0, 0)
+    ring = torch.ones(h, w, dtype=torch.bool)
+    ring[16:-16, 16:-16] = False
+    for border, trained in ((16, False), (0, True)):
+        rel = torch.full((1, 1, h, w), 0.5, requires_grad=True)
+        gen = torch.Generator().manual_seed(0)
+        loss, _ = reliability_ap_loss(desc, desc, rel, flow, mask, gen, APSampling(border=border, query_stride=1))
+        loss.backward()
+        assert bool((rel.grad[0, 0][ring] != 0).any()) is trained
+        # targets must keep the candidate disc inside B: the outer 7 px stay untrained
+        assert not (rel.grad[0, 0, :7] != 0).any()
+
+
+def test_a_batch_scores_each_query_against_its_own_images_distractors():
+    """The batch's loss is the mean of each image's loss alone (equal query counts)."""
+    torch.manual_seed(4)
+    h = w = 40
+    desc_a = F.normalize(torch.randn(3, 8, h, w), dim=1)
+    desc_b = F.normalize(desc_a + 0.5 * torch.randn(3, 8, h, w), dim=1)
+    rel = torch.rand(3, 1, h, w)
+    flow, mask = _shift_flow(h, w, 0, 0, b=3)
+    cfg = APSampling(border=8)
+    batch_loss, batch_ap = reliability_ap_loss(desc_a, desc_b, rel, flow, mask, torch.Generator().manual_seed(5), cfg)
+    alone = [
+        reliability_ap_loss(
+            desc_a[i : i + 1],
+            desc_b[i : i + 1],
+            rel[i : i + 1],
+            flow[:1],
+            mask[:1],
+            torch.Generator().manual_seed(5),
+            cfg,
+        )
+        for i in range(3)
+    ]
+    assert batch_loss.item() == pytest.approx(sum(x[0].item() for x in alone) / 3, abs=1e-6)
+    assert batch_ap.item() == pytest.approx(sum(x[1].item() for x in alone) / 3, abs=1e-6)
+
+
 def test_descriptor_gradients_flow_through_the_ap_loss():
     torch.manual_seed(1)
     h = w = 48

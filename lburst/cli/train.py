@@ -63,6 +63,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="R2D2's base AP (kappa) of the reliability loss: pixels whose AP passes it learn to be reliable (default 0.5)",
     )
     p.add_argument(
+        "--ap-border",
+        type=integer(0, 64),
+        metavar="PX",
+        help="the reliability loss skips query pixels this close to the border (R2D2: 16); "
+        "0 also trains reliability at the image border",
+    )
+    p.add_argument(
         "--distill-weight",
         type=real(0),
         help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)",
@@ -111,6 +118,7 @@ def given_options(args: argparse.Namespace) -> dict:
         "ap_weight": args.ap_weight,
         "lr": args.lr,
         "rel_base": args.rel_base,
+        "ap_border": args.ap_border,
         "distill_weight": args.distill_weight,
         "spread_weight": args.spread_weight,
         "arch": args.arch,

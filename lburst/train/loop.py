@@ -53,6 +53,7 @@ from lburst.train.losses import (
     reliability_ap_loss,
     spread_loss,
 )
+from lburst.train.memory import check_step_memory
 from lburst.train.pairs import PairConfig
 
 LOG_FIELDS = (
@@ -91,6 +92,13 @@ class TrainConfig:
     reliability up where its AP passes it and down where it does not.  Under heavy noise
     fewer pixels reach 0.5, so fewer pass the 0.7 keypoint threshold at test time; a lower
     base keeps pixels whose descriptors still match under that noise.
+
+    ``ap_border`` (pixels): the reliability loss takes no query pixel this close to the
+    border of burst A (R2D2's 16).  Reliability there is then never trained, and
+    lburst-b5 learnt to give its outer 32 pixels a low one (mean 0.31-0.45 against 0.68
+    inside; the published model's 0.48-0.54), so its keypoints avoid the image borders,
+    where they would pin down the camera's distortion.  0 trains every pixel whose target
+    lies inside burst B.
 
     ``snapshot_every`` (steps) also keeps the weights at every multiple of it as
     ``snapshots/step_XXXXXX.pt`` in the published layout (a few MB each), so the
@@ -140,6 +148,7 @@ class TrainConfig:
     rel_logit_weight: float = 0.0
     rel_logit_margin: float = 4.0
     rel_base: float = 0.5
+    ap_border: int = 16
     distill_weight: float = 0.0
     spread_weight: float = 0.0
     arch: str = "lburst"
@@ -232,6 +241,13 @@ def build_network(arch: str, frames: int) -> torch.nn.Module:
     raise ValueError(f"unknown architecture {arch!r}: use {', '.join(ARCHS)} or an {LITE_NAME}(...) string")
 
 
+def device_memory_limit(device: torch.device) -> int | None:
+    """The memory a step may use on ``device``: 90 % of a GPU's, half of the machine's on a CPU."""
+    if device.type == "cuda":
+        return int(torch.cuda.get_device_properties(device).total_memory * 0.9)
+    return None
+
+
 def load_teacher(spec: str, frames: int, device: torch.device) -> torch.nn.Module:
     """The frozen teacher network named by ``spec`` (a checkpoint file or a shipped name)."""
     from lburst.weights import resolve_weights
@@ -267,6 +283,7 @@ def training_step(
     memory_format: torch.memory_format = torch.channels_last,
     spread_weight: float = 0.0,
     teacher_on_noisy: bool = False,
+    ap_border: int = 16,
 ) -> dict[str, torch.Tensor]:
     """Losses of one batch (both bursts through the net in one pass; see ``TrainConfig.precision``).
 
@@ -284,7 +301,9 @@ def training_step(
     flow, mask = batch["flow"], batch["mask"]
     cosim = cosim_loss(rep[:n], rep[n:], flow, mask, patch)
     peaky = (peaky_loss(rep[:n], patch) + peaky_loss(rep[n:], patch)) / 2
-    reliability, ap = reliability_ap_loss(desc[:n], desc[n:], rel[:n], flow, mask, generator, APSampling(base=rel_base))
+    reliability, ap = reliability_ap_loss(
+        desc[:n], desc[n:], rel[:n], flow, mask, generator, APSampling(base=rel_base, border=ap_border)
+    )
     loss = cosim + peaky + reliability + ap_weight * (1 - ap)
     if rel_logit_weight > 0:
         loss = loss + rel_logit_weight * logit_margin_loss(out["reliability_logits"].float(), rel_logit_margin)
@@ -435,6 +454,7 @@ def train(
                 f"{cfg.init}: a {init_net.config.frames}-frame network, but the run has {cfg.frames} frames"
             )
         net.load_state_dict(init_net.state_dict())
+    check_step_memory(net, 3 * cfg.frames, cfg.batch_size, cfg.pair.crop, device_memory_limit(device))
     layout = training_memory_format(device, memory_format)
     net = net.to(device).to(memory_format=layout)
     teacher = load_teacher(cfg.teacher, cfg.frames, device).to(memory_format=layout) if cfg.teacher else net
@@ -513,6 +533,7 @@ def train(
                     memory_format=layout,
                     spread_weight=cfg.spread_weight,
                     teacher_on_noisy=cfg.teacher is not None,
+                    ap_border=cfg.ap_border,
                 )
             optimizer.zero_grad(set_to_none=True)
             losses["loss"].backward()

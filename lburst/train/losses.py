@@ -153,7 +153,9 @@ def reliability_ap_loss(
     )
     gx, gy = gx.reshape(-1), gy.reshape(-1)
     grid_desc = desc_b.permute(0, 2, 3, 1)[:, gy, gx]  # (B, G, D)
-    far_scores = torch.einsum("qd,qgd->qg", query, grid_desc[batch])
+    # queries are in batch order: one (Q_b, D) x (D, G) product per image, never a (Q, G, D) copy
+    counts = torch.bincount(batch, minlength=bsz).tolist()
+    far_scores = torch.cat([q @ grid_desc[b].T for b, q in enumerate(query.split(counts))])
     far_dist = torch.hypot(gx[None] - target[:, :1], gy[None] - target[:, 1:])
 
     # column 0: the best positive; then negatives near the target and far distractors,
