@@ -169,3 +169,20 @@ def test_extract_takes_keyframes_by_motion(recordings, tmp_path, capsys):
     assert main([*args, "--motion", "0.1"]) == 0
     keys = sorted(int(p.name[1:7]) for p in (tmp_path / "m" / "f").glob("*.npz"))
     assert keys[0] == 0 and 2 <= len(keys) < 33, keys  # a turning camera: keyframes, but not every frame
+
+
+def test_a_second_cut_of_a_recording_is_listed_and_the_first_is_named_not_mixed_in(recordings, tmp_path, capsys):
+    import h5py
+
+    out = tmp_path / "cuts"
+    args = ["extract", str(recordings / "f.mp4"), "--method", "orb", "--out", str(out), "--h5"]
+    assert main([*args, "--every", "8"]) == 0
+    assert main([*args, "--every", "16"]) == 0
+    said = capsys.readouterr().out
+    cut = json.loads((out / "f" / "cut.json").read_text())
+    assert cut["keyframes"] == ["f000000_t0.000s", "f000016_t0.800s", "f000032_t1.600s"]
+    assert "every=16" in cut["options"]
+    assert "2 keyframes of an earlier cut stay in" in said  # frames 8 and 24
+    assert len(list((out / "f").glob("*.npz"))) == 5
+    with h5py.File(out / "features.h5") as h5:
+        assert sorted(h5["f"].keys()) == cut["keyframes"]

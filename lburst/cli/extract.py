@@ -6,13 +6,15 @@ SHA-1 and options, the burst's path and content SHA-1); a re-run skips a burst o
 its file holds the same burst by the same method, and recomputes it otherwise.  A name
 that two different bursts map to (``a/b0`` and ``c/b0``) is refused for the second.
 ``features.h5`` is written at the end from every lburst ``.npz`` in the output folder
-(this run's and earlier runs'), as hloc expects one features file per folder.  Every file is written atomically, and a burst that fails is reported and
-skipped: the exit code is 1 if any failed.
+(this run's and earlier runs'; of a recording, its last cut's keyframes, listed in
+``OUT/<recording>/cut.json``), as hloc expects one features file per folder.  Every file is
+written atomically, and a burst that fails is reported and skipped: the exit code is 1 if any failed.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -27,6 +29,8 @@ from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
 from lburst.model.runtimes import RUNTIMES
 from lburst.sources import is_recording, open_recording
+
+CUT_FILE = "cut.json"
 
 
 def burst_name(path: Path) -> str:
@@ -94,13 +98,17 @@ def extract_recording(
 ) -> tuple[int, int, str | None]:
     """Features of every keyframe burst of a recording, one ``.npz`` each in ``OUT/<recording>/``;
     returns (extracted, already done, why reading stopped or ``None``) and appends the
-    finished keyframes to ``finished``.  Keyframes finished before a bad frame are kept."""
+    finished keyframes to ``finished``.  Keyframes finished before a bad frame are kept.
+    ``OUT/<recording>/cut.json`` lists this cut's keyframes (:func:`write_cut`): a cut with
+    other options leaves the earlier cut's files, unlisted, and says so."""
     from lburst.sfm.recording import cache_key
 
     folder = args.out / burst_name(path)
     done = skipped = 0
+    names: list[str] = []
+    options = recording_options(args)
     try:
-        recording = open_recording(path, recording_options(args))
+        recording = open_recording(path, options)
         content = cache_key(recording)
         for keyframe, burst in recording.bursts():
             target = folder / f"{keyframe.name}.npz"
@@ -112,10 +120,29 @@ def extract_recording(
                 folder.mkdir(parents=True, exist_ok=True)
                 store.save(target, features, (burst.shape[2], burst.shape[1]), key)
                 done += 1
+            names.append(keyframe.name)
             finished.append((f"{burst_name(path)}/{keyframe.name}", target))
     except (BurstError, ValueError, OSError) as exc:
+        write_cut(folder, path, options, names)
         return done, skipped, str(exc)
+    write_cut(folder, path, options, names)
     return done, skipped, None
+
+
+def write_cut(folder: Path, path: Path, options, names: list[str]) -> None:
+    """``folder/cut.json``: the recording, how it was cut and its keyframes' names, in order
+    (what ``features.h5`` holds of this folder); says how many ``.npz`` of an earlier cut stay."""
+    if not folder.is_dir():
+        return
+    cut = {"recording": str(path), "options": options.signature(), "keyframes": names}
+    with atomic_path(folder / CUT_FILE) as tmp:
+        tmp.write_text(json.dumps(cut, indent=1))
+    stale = [p for p in folder.glob("*.npz") if p.stem not in set(names) and store.read_meta(p) is not None]
+    if stale:
+        tqdm.write(
+            f"{path}: {len(stale)} keyframes of an earlier cut stay in {folder}; {CUT_FILE} and features.h5 "
+            f"list this cut's {len(names)} ({options.signature().split(',gain=')[0]})"
+        )
 
 
 def features_in_folder(out: Path) -> dict[str, Path]:
@@ -123,9 +150,17 @@ def features_in_folder(out: Path) -> dict[str, Path]:
     ``NAME.npz``, a recording's ``REC/KEYFRAME.npz``); files without lburst's metadata are left out."""
     found = {}
     for npz in sorted(list(out.glob("*.npz")) + list(out.glob("*/*.npz"))):
-        if store.read_meta(npz) is not None:
+        if store.read_meta(npz) is not None and npz.stem in this_cut(npz.parent, npz.stem):
             found[npz.relative_to(out).with_suffix("").as_posix()] = npz
     return found
+
+
+def this_cut(folder: Path, name: str) -> set[str] | tuple[str]:
+    """The keyframe names of ``folder``'s last cut (its ``cut.json``), or ``(name,)`` when it has none."""
+    try:
+        return set(json.loads((folder / CUT_FILE).read_text())["keyframes"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return (name,)
 
 
 def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
