@@ -15,7 +15,12 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", type=Path, help="folder of sequence folders (Oxford or HPatches layout)")
     p.add_argument("--methods", nargs="+", default=["lburst", "sift", "orb", "merge+sift"])
     p.add_argument("--sigma", type=real(0), nargs="+", default=[25, 50, 100], help="Gaussian noise std levels (0..255)")
-    p.add_argument("--noise", nargs="*", default=[], help="extra noise levels as lburst.noise specs")
+    p.add_argument(
+        "--noise",
+        nargs="*",
+        default=[],
+        help="extra noise levels as lburst.noise specs (e.g. lowlight:night, sensor:imx686@6400,photons=20)",
+    )
     p.add_argument("--max-side", type=integer(8))
     p.add_argument("--top-k", type=integer(1), default=5000)
     p.add_argument("--out", type=Path, default=Path("outputs/homography"))

@@ -15,7 +15,11 @@ from lburst.demo import lburst_spec, run_demo
 def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("outputs/demo"), help="report folder")
     p.add_argument("--weights", help="LBurst checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
-    p.add_argument("--noise", default="lowlight:moonless", help="noise of the flight (lburst.noise spec)")
+    p.add_argument(
+        "--noise",
+        default="lowlight:moonless",
+        help="noise of the flight (lburst.noise spec, e.g. lowlight:night or sensor:imx686@6400,photons=20)",
+    )
     p.add_argument("--bursts", type=integer(2), default=15)
     p.add_argument("--seed", type=integer(0), default=0)
     p.add_argument("--overlap", type=integer(1), default=4, help="match each burst with this many next ones")

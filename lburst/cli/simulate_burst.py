@@ -32,7 +32,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="apparent motion per frame, pixels",
     )
     p.add_argument(
-        "--noise", default="gaussian:50", help="none, gaussian:STD, gaussian-var:V, lowlight:PHOTONS|night|..."
+        "--noise",
+        default="gaussian:50",
+        help="none, gaussian:STD, gaussian-var:V, lowlight:PHOTONS|night|... or sensor:imx686|a7s2@ISO[,photons=P]",
     )
     p.add_argument("--seed", type=integer(0), default=0)
 
