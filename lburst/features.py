@@ -11,6 +11,10 @@ A *features* dict describes the keypoints of a burst's common (middle) frame:
 
 and optionally ``orientations`` (K,) float32 radians and ``slopes`` (K, 2) float32
 apparent motion in pixels per frame (BuFF).
+
+Every extractor also gives ``image_size`` (2,) int64: (width, height) of the common frame
+in pixels, as LightGlue's ``image_size``.  It describes the image, not the keypoints:
+:func:`select` and :func:`concatenate` keep it whole (:data:`PER_IMAGE`).
 """
 
 from __future__ import annotations
@@ -32,6 +36,26 @@ class Extractor(Protocol):
 
 
 REQUIRED = ("keypoints", "scales", "scores", "descriptors")
+PER_IMAGE = ("image_size",)  # keys that describe the image, not one entry per keypoint
+
+
+def image_size(width: int, height: int) -> np.ndarray:
+    """The ``image_size`` entry of a features dict: ``[width, height]`` int64."""
+    return np.array([width, height], np.int64)
+
+
+def select(features: Features, index: np.ndarray) -> Features:
+    """The keypoints ``index`` (indices or a boolean mask) of ``features``: every per-keypoint
+    array indexed, the per-image entries (:data:`PER_IMAGE`) kept as they are."""
+    return {key: value if key in PER_IMAGE else value[index] for key, value in features.items()}
+
+
+def concatenate(parts: list[Features]) -> Features:
+    """The keypoints of several features dicts of one image, one after the other (the
+    per-image entries taken from the first)."""
+    return {
+        key: parts[0][key] if key in PER_IMAGE else np.concatenate([part[key] for part in parts]) for key in parts[0]
+    }
 
 
 def is_binary(features: Features) -> bool:
@@ -57,6 +81,11 @@ def check_features(features: Features) -> Features:
         raise ValueError(f"descriptors must be float32 or uint8, got {d.dtype}")
     if not np.isfinite(features["keypoints"]).all() or (d.dtype == np.float32 and not np.isfinite(d).all()):
         raise ValueError("keypoints and descriptors must be finite (no NaN or inf)")
+    size = features.get("image_size")
+    if size is not None and (np.shape(size) != (2,) or not np.issubdtype(np.asarray(size).dtype, np.integer)):
+        raise ValueError(f"image_size must be (2,) integers (width, height), got {np.asarray(size).tolist()}")
+    if size is not None and min(size) < 1:
+        raise ValueError(f"image_size must be positive (width, height), got {tuple(int(v) for v in size)}")
     return features
 
 
@@ -92,4 +121,4 @@ def spread_top_k(features: Features, top_k: int, image_size: tuple[int, int], ce
     first = rank < top_k // cells**2
     chosen = np.concatenate([np.flatnonzero(first), np.flatnonzero(~first)])[:top_k]
     keep = order[np.sort(chosen)]  # back in score order
-    return {key: value[keep] for key, value in features.items()}
+    return select(features, keep)

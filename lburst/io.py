@@ -323,17 +323,35 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
     return image
 
 
+def features_image_size(features: dict[str, np.ndarray], image_size: tuple[int, int] | None) -> tuple[int, int]:
+    """The (W, H) to store with ``features``: ``image_size``, else the features' own
+    ``image_size``; ``ValueError`` when neither is there or the two differ."""
+    own = features.get("image_size")
+    own = None if own is None else (int(own[0]), int(own[1]))
+    if image_size is None and own is None:
+        raise ValueError("the image size (W, H) is needed: the features have no image_size")
+    if image_size is not None and own is not None and tuple(int(v) for v in image_size) != own:
+        raise ValueError(f"image size {tuple(image_size)} differs from the features' image_size {own}")
+    return own if image_size is None else (int(image_size[0]), int(image_size[1]))
+
+
 def write_features_npz(
-    path: str | Path, features: dict[str, np.ndarray], image_size: tuple[int, int], meta: dict | None = None
+    path: str | Path,
+    features: dict[str, np.ndarray],
+    image_size: tuple[int, int] | None = None,
+    meta: dict | None = None,
 ) -> Path:
     """``.npz`` with ``keypoints`` (K, 3) x, y, scale (pixel centres at integer coordinates),
-    ``descriptors`` (K, D), ``scores`` (K,) and ``imsize`` (W, H), and ``meta`` as a JSON
-    string ``_meta`` (see :mod:`lburst.store`); written atomically."""
+    ``descriptors`` (K, D), ``scores`` (K,) and ``imsize`` (W, H) (``image_size``, by default
+    the features' own, stored once as ``imsize``), and ``meta`` as a JSON string ``_meta``
+    (see :mod:`lburst.store`); written atomically."""
     import json
 
     path = Path(path)
+    image_size = features_image_size(features, image_size)
     keypoints = np.concatenate([features["keypoints"], features["scales"][:, None]], 1).astype(np.float32)
-    extra = {k: v for k, v in features.items() if k not in ("keypoints", "scales", "descriptors", "scores")}
+    stored_apart = ("keypoints", "scales", "descriptors", "scores", "image_size", "imsize")
+    extra = {k: v for k, v in features.items() if k not in stored_apart}
     if meta is not None:
         extra["_meta"] = np.array(json.dumps(meta, ensure_ascii=True))
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
@@ -349,22 +367,26 @@ def write_features_npz(
 
 
 def read_features_npz(path: str | Path) -> dict[str, np.ndarray]:
-    """Features written by :func:`write_features_npz` in the features-dict layout (plus ``imsize``)."""
+    """Features written by :func:`write_features_npz` in the features-dict layout, with
+    ``image_size`` (2,) int64 from the stored ``imsize`` (which is kept too, as stored)."""
     with np.load(path) as data:
         out = {k: data[k] for k in data.files if not k.startswith("_")}
     kp = out.pop("keypoints")
     out["keypoints"], out["scales"] = kp[:, :2].copy(), kp[:, 2].copy()
+    if "imsize" in out:
+        out["image_size"] = out["imsize"].astype(np.int64)
     return out
 
 
 def write_features_h5(
-    path: str | Path, name: str, features: dict[str, np.ndarray], image_size: tuple[int, int]
+    path: str | Path, name: str, features: dict[str, np.ndarray], image_size: tuple[int, int] | None = None
 ) -> None:
     """Add or replace group ``name`` in an hloc-style ``features.h5``: ``keypoints`` (K, 2)
     float32 (pixel centres at integer coordinates, as hloc; COLMAP adds 0.5),
-    ``descriptors`` (D, K), ``scores`` (K,), ``image_size`` (W, H)."""
+    ``descriptors`` (D, K), ``scores`` (K,), ``image_size`` (W, H) (by default the features' own)."""
     import h5py
 
+    image_size = features_image_size(features, image_size)
     with h5py.File(path, "a") as f:
         if name in f:
             del f[name]

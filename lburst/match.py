@@ -1,4 +1,5 @@
-"""Mutual nearest-neighbour matching of descriptors (L2 for float, Hamming for binary)."""
+"""Mutual nearest-neighbour matching of descriptors (L2 for float, Hamming for binary: on
+the CPU by OpenCV's brute-force matcher with cross-check, which gives the same pairs)."""
 
 from __future__ import annotations
 
@@ -32,18 +33,39 @@ def _distances(a: torch.Tensor, b: torch.Tensor, binary: bool) -> torch.Tensor:
     return torch.cdist(a.float(), b.float())
 
 
+def hamming_mutual_nearest_neighbours(
+    desc_a: np.ndarray, desc_b: np.ndarray, max_distance: float | None = None
+) -> np.ndarray:
+    """:func:`mutual_nearest_neighbours` of packed binary descriptors (uint8, non-empty) by
+    ``cv2.BFMatcher(NORM_HAMMING, crossCheck=True)``: each side's nearest is its first
+    nearest, as ``argmin`` takes it, so the pairs are the same; sorted by ``i``."""
+    import cv2
+
+    found = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(
+        np.ascontiguousarray(desc_a), np.ascontiguousarray(desc_b)
+    )
+    pairs = np.array([(m.queryIdx, m.trainIdx) for m in found], np.int64).reshape(-1, 2)
+    if max_distance is not None:
+        pairs = pairs[np.array([m.distance for m in found], np.float64).reshape(-1) <= max_distance]
+    return pairs[np.argsort(pairs[:, 0], kind="stable")]
+
+
 def mutual_nearest_neighbours(
     desc_a: np.ndarray, desc_b: np.ndarray, max_distance: float | None = None, device: str = "cpu"
 ) -> np.ndarray:
-    """Indices ``(M, 2)`` of pairs (i, j) where ``b[j]`` is a's nearest and ``a[i]`` is b's nearest.
+    """Indices ``(M, 2)`` of pairs (i, j) where ``b[j]`` is a's nearest and ``a[i]`` is b's
+    nearest (the first one of equally near ones), sorted by ``i``.
 
-    ``desc_a`` (Ka, D) and ``desc_b`` (Kb, D): float32 (L2) or uint8 packed bits (Hamming).
-    Optionally drop pairs farther apart than ``max_distance``.
+    ``desc_a`` (Ka, D) and ``desc_b`` (Kb, D): float32 (L2) or uint8 packed bits (Hamming;
+    on the CPU by :func:`hamming_mutual_nearest_neighbours`).  Optionally drop pairs farther
+    apart than ``max_distance``.
     """
     check_descriptors(desc_a, desc_b)
     if len(desc_a) == 0 or len(desc_b) == 0:
         return np.zeros((0, 2), np.int64)
     binary = desc_a.dtype == np.uint8
+    if binary and torch.device(device).type == "cpu":
+        return hamming_mutual_nearest_neighbours(desc_a, desc_b, max_distance)
     a = torch.from_numpy(np.ascontiguousarray(desc_a)).to(device)
     b = torch.from_numpy(np.ascontiguousarray(desc_b)).to(device)
     dist = _distances(a, b, binary)

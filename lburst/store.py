@@ -84,8 +84,8 @@ def read_meta(path: str | Path) -> dict[str, Any] | None:
 
 
 def load(path: str | Path, key: Any) -> tuple[Features, tuple[int, int], dict[str, Any]] | None:
-    """Features, image size (W, H) and ``_meta`` stored under ``key`` at ``path``; ``None`` when
-    the file is missing, unreadable or holds another key."""
+    """Features (with their ``image_size``), image size (W, H) and ``_meta`` stored under
+    ``key`` at ``path``; ``None`` when the file is missing, unreadable or holds another key."""
     meta = read_meta(path)
     if meta is None or _canonical(meta.get("key")) != _canonical(key):
         return None
@@ -98,8 +98,9 @@ def load(path: str | Path, key: Any) -> tuple[Features, tuple[int, int], dict[st
         return None
 
 
-def save(path: str | Path, features: Features, image_size: tuple[int, int], key: Any, **info: Any) -> Path:
-    """Store ``features`` of an image of ``image_size`` (W, H) under ``key`` (and ``info``), atomically."""
+def save(path: str | Path, features: Features, image_size: tuple[int, int] | None, key: Any, **info: Any) -> Path:
+    """Store ``features`` of an image of ``image_size`` (W, H; ``None``: the features' own
+    ``image_size``) under ``key`` (and ``info``), atomically."""
     return write_features_npz(path, features, image_size, meta={"key": key, **info})
 
 

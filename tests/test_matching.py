@@ -123,3 +123,93 @@ def test_commands_check_the_matcher_before_they_start(words, capsys):
         main([*words, "--matcher", "ratio,ratio=3"])
     assert info.value.code == 2
     assert "argument --matcher: matcher 'ratio': ratio must be in (0, 1]" in capsys.readouterr().err
+
+
+def noisy_copies(rng, n=200, kept=150, distractors=50, noise=0.05):
+    """``a``: noisy copies of ``kept`` of ``b``'s descriptors, then distractors; ``b``: ``n`` unit vectors."""
+    b = unit(rng, n)
+    a = b[rng.permutation(n)[:kept]] + noise * unit(rng, kept)
+    return np.concatenate([a, unit(rng, distractors)]).astype(np.float32), b
+
+
+@pytest.mark.parametrize("ratio", [0.8, 0.95, 1.0])
+def test_smnn_is_kornias_match_smnn(ratio):
+    kornia = pytest.importorskip("kornia")
+    import torch
+
+    rng = np.random.default_rng(3)
+    for noise in (0.05, 0.5, 1.0):  # clear matches, then ambiguous ones where the two directions differ
+        a, b = noisy_copies(rng, noise=noise)
+        _, expected = kornia.feature.match_smnn(torch.from_numpy(a), torch.from_numpy(b), ratio)
+        got = create(f"smnn,ratio={ratio}")(feats(a), feats(b))
+        np.testing.assert_array_equal(got, expected.numpy().reshape(-1, 2))
+    one = create("smnn")(feats(a[:1]), feats(b))  # no second neighbour on one side: no match, as kornia
+    assert one.shape == (0, 2) and len(kornia.feature.match_smnn(torch.from_numpy(a[:1]), torch.from_numpy(b))[1]) == 0
+
+
+def test_ratio_tests_one_direction_where_smnn_tests_both():
+    rng = np.random.default_rng(4)
+    a, b = noisy_copies(rng, noise=0.8)
+    ratio = {tuple(m) for m in create("ratio,ratio=0.9")(feats(a), feats(b)).tolist()}
+    smnn = {tuple(m) for m in create("smnn,ratio=0.9")(feats(a), feats(b)).tolist()}
+    assert smnn < ratio  # the reverse ratio test drops some of the mutual one-way matches
+    assert create("smnn").options.ratio == 0.95  # kornia's default
+
+
+@pytest.mark.parametrize("spec", ["mnn", "ratio", "smnn"])
+def test_matchers_give_the_similarity_of_each_match(spec):
+    from lburst.matching import match_with_scores
+
+    rng = np.random.default_rng(5)
+    a, b = noisy_copies(rng, noise=0.3)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    matcher = create(spec)
+    matches, scores = matcher.match(feats(a), feats(b))
+    np.testing.assert_array_equal(matches, matcher(feats(a), feats(b)))  # the plain call is unchanged
+    assert scores.dtype == np.float32 and scores.shape == (len(matches),) and len(matches) > 50
+    np.testing.assert_allclose(scores, (a[matches[:, 0]] * b[matches[:, 1]]).sum(1), atol=1e-6)
+    assert (scores <= 1).all() and (scores >= -1).all()
+    plain = lambda fa, fb: matcher(fa, fb)  # noqa: E731 - a matcher with no match method
+    for found, expected in zip(match_with_scores(plain, feats(a), feats(b)), (matches, scores)):
+        np.testing.assert_array_equal(found, expected)
+
+
+def test_binary_scores_follow_the_hamming_distance():
+    rng = np.random.default_rng(6)
+    b = rng.integers(0, 256, (80, 32), dtype=np.uint8)
+    a = b[:50].copy()
+    a[:, :2] ^= np.array([1, 3], np.uint8)  # three bits off
+    matches, scores = create("mnn").match(feats(a), feats(b))
+    assert {tuple(m) for m in matches.tolist()} == {(i, i) for i in range(50)}
+    np.testing.assert_allclose(scores, 1 - 2 * 3 / 256)
+
+
+def argmin_mutual(a: np.ndarray, b: np.ndarray, max_distance=None) -> np.ndarray:
+    """Mutual nearest neighbours by Hamming distance as lburst computed them before OpenCV:
+    torch's first argmin each way."""
+    import torch
+
+    from lburst.match import _distances
+
+    dist = _distances(torch.from_numpy(a), torch.from_numpy(b), True)
+    nn_ab, nn_ba = dist.argmin(1), dist.argmin(0)
+    ia = torch.arange(len(a))
+    keep = nn_ba[nn_ab] == ia
+    if max_distance is not None:
+        keep &= dist[ia, nn_ab] <= max_distance
+    return torch.stack([ia[keep], nn_ab[keep]], 1).numpy()
+
+
+@pytest.mark.parametrize("width", [1, 4, 32])
+def test_binary_mnn_by_opencv_equals_the_argmin_one_ties_included(width):
+    from lburst.match import hamming_mutual_nearest_neighbours
+
+    rng = np.random.default_rng(width)
+    for _ in range(5):
+        a = rng.integers(0, 256, (int(rng.integers(1, 200)), width), dtype=np.uint8)
+        b = rng.integers(0, 256, (int(rng.integers(1, 200)), width), dtype=np.uint8)
+        b[: len(b) // 2] = a[rng.integers(0, len(a), len(b) // 2)]  # exact duplicates: many ties
+        for max_distance in (None, 2, 10):
+            expected = argmin_mutual(a, b, max_distance)
+            np.testing.assert_array_equal(hamming_mutual_nearest_neighbours(a, b, max_distance), expected)
+            np.testing.assert_array_equal(mutual_nearest_neighbours(a, b, max_distance), expected)

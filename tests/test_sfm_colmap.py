@@ -90,3 +90,48 @@ def test_a_failing_colmap_child_is_reported_not_fatal(tmp_path):
     with pytest.raises(ColmapError, match="exited with 1") as err:
         run_job_subprocess(tmp_path)
     assert "colmap.log" in str(err.value)
+
+
+def test_the_child_reports_each_stage_as_it_ends(tmp_path):
+    from lburst.sfm.colmap import run_job_subprocess
+
+    job, keypoints, pairs, matches = small_job(tmp_path)
+    job.save(tmp_path / "job.json")
+    np.savez(
+        tmp_path / "input.npz",
+        pairs=pairs,
+        **{f"kp_{i}": kp for i, kp in enumerate(keypoints)},
+        **{f"m_{p}": m for p, m in enumerate(matches)},
+    )
+    lines: list[str] = []
+    summary = run_job_subprocess(tmp_path, report=lines.append)
+    assert not summary["converged"]  # random matches: nothing verified, nothing to map
+    assert [line.rsplit(": ", 1)[0] for line in lines] == [
+        "COLMAP feature and match import (3 images, 3 pairs)",
+        "COLMAP geometric verification",
+    ]
+    assert all(line.endswith(" s") and float(line.rsplit(": ", 1)[1][:-2]) >= 0 for line in lines)
+
+
+def test_a_long_stage_is_reported_while_it_runs(tmp_path):
+    from lburst.sfm.colmap import HEARTBEAT_SECONDS, StageLog, StageReader
+
+    now = [0.0]
+    lines: list[str] = []
+    reader = StageReader(tmp_path / "stages.txt", lines.append, clock=lambda: now[0])
+    reader.poll()  # no file yet: nothing
+    log = StageLog(tmp_path / "stages.txt")
+    with log.stage("mapping"):
+        reader.poll()
+        now[0] = HEARTBEAT_SECONDS - 1
+        reader.poll()
+        assert lines == []
+        now[0] = HEARTBEAT_SECONDS + 1
+        reader.poll()
+        reader.poll()  # once per interval
+        assert lines == [f"COLMAP mapping: running, {HEARTBEAT_SECONDS + 1:.0f} s so far"]
+    reader.poll()
+    assert len(lines) == 2 and lines[1].startswith("COLMAP mapping: ") and lines[1].endswith(" s")
+    now[0] = 100.0
+    reader.poll()  # no stage under way: silence
+    assert len(lines) == 2

@@ -32,7 +32,7 @@ Speed: a 5-frame 1024x768 burst with the default 9x9 slope grid takes about 2.3 
 Output (see :mod:`lburst.features`): ``keypoints`` in common-frame pixels, ``scales``
 SIFT-style diameters ``2 * sigma``, ``scores`` the interpolated |DoG| contrast,
 ``orientations`` radians (OpenCV's angle convention), ``slopes`` ``(K, 2)`` (u, v)
-px/frame, ``descriptors`` 128-D float32.
+px/frame, ``descriptors`` 128-D float32, ``image_size`` the frames' (width, height).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from lburst.features import Features, empty_features
+from lburst.features import Features, empty_features, image_size, select
 from lburst.frames import gray_unit, time_offsets
 from lburst.methods import register, sift_describe
 from lburst.methods.buff_scale import OctaveStack, frame_pyramids
@@ -142,7 +142,7 @@ class Buff:
                 break
             found.append(self._detect(octv, frame_shifts / 2**octv.index))
             octv.cache.clear()
-        return self._describe(found, n)
+        return {**self._describe(found, n), "image_size": image_size(w, h)}
 
     def _detect(self, octv: OctaveStack, shifts: np.ndarray) -> dict[str, np.ndarray]:
         """Keypoints of one octave: positions/levels refined, slopes, contrast; in octave units."""
@@ -348,7 +348,7 @@ class Buff:
                 out["descriptors"].append(desc)
         feats = {k: np.concatenate(v).astype(np.float32) for k, v in out.items()}
         keep = np.argsort(-feats["scores"], kind="stable")[: cfg.max_features]
-        return {k: v[keep] for k, v in feats.items()}
+        return select(feats, keep)
 
 
 def _patch_sampler(images: np.ndarray, shifts: np.ndarray):

@@ -112,17 +112,17 @@ class LearnedExtractor:
     def __call__(self, burst: np.ndarray) -> Features:
         if not self.spread or self.top_k is None:
             return self.model.extract(burst, top_k=self.top_k, rotations=self.rotations, **self.options)
-        from lburst.features import spread_top_k
+        from lburst.features import concatenate, select, spread_top_k
 
         every = self.model.extract(burst, top_k=None, rotations=self.rotations, **self.options)
         size = (burst.shape[2], burst.shape[1])
         if "rotations" not in every:
             return spread_top_k(every, self.top_k, size, self.spread)
         sets = [
-            spread_top_k({k: v[every["rotations"] == turn] for k, v in every.items()}, self.top_k, size, self.spread)
+            spread_top_k(select(every, every["rotations"] == turn), self.top_k, size, self.spread)
             for turn in np.unique(every["rotations"])
         ]
-        return {k: np.concatenate([s[k] for s in sets]) for k in sets[0]}
+        return concatenate(sets)
 
 
 def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtractor:

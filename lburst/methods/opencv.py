@@ -6,7 +6,7 @@ scaled to 8 bit first.  Keypoints use OpenCV's convention, which is lburst's (pi
 centres at integer coordinates).  ``scales`` is OpenCV's keypoint ``size`` (the
 diameter of the described region), ``scores`` its ``response`` and ``orientations``
 its ``angle`` in radians.  SIFT descriptors are float32 (L2); ORB's stay packed uint8
-(32 bytes, Hamming).
+(32 bytes, Hamming).  ``image_size`` is the frame's (width, height).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from lburst.features import Features, empty_features
+from lburst.features import Features, empty_features, image_size
 from lburst.frames import check_burst, to_gray8
 from lburst.methods import register
 
@@ -66,7 +66,7 @@ class OpenCVExtractor:
         features = keypoints_to_features(keypoints, descriptors, self.dim, self.binary)
         if self.root and len(features["descriptors"]):
             features["descriptors"] = root_sift(features["descriptors"])
-        return features
+        return {**features, "image_size": image_size(image.shape[1], image.shape[0])}
 
 
 @dataclass(frozen=True)

@@ -22,13 +22,14 @@ import torch
 import torch.nn.functional as F
 
 from lburst.align import align_burst
-from lburst.features import Features
+from lburst.features import Features, concatenate, image_size, select
 from lburst.model.fast import FastLBurstNet, descriptor_stride, descriptors_at
 from lburst.model.lite import LiteNet
 from lburst.model.network import (
     WHITENING_KEYS,
     LBurstNet,
     check_device,
+    check_float_burst,
     check_precision,
     load_checkpoint,
     normalize_burst,
@@ -175,6 +176,63 @@ def dense_bytes(height: int, width: int, dim: int = 128) -> int:
     return 3 * 4 * height * width * dim
 
 
+EIGHT_BIT_TOLERANCE = 1e-3  # in steps of 1/255: a float value this close to k/255 came from 8 bits
+_INTEGER_TENSORS = (torch.uint8, getattr(torch, "uint16", torch.uint8))  # taken as they are
+
+
+def _channels_last(x: torch.Tensor) -> np.ndarray:
+    """A ``(..., 3, H, W)`` tensor as a NumPy ``(..., H, W, 3)`` array on the CPU."""
+    return x.movedim(-3, -1).contiguous().cpu().numpy()
+
+
+def _integer_frames(x: torch.Tensor) -> torch.Tensor:
+    """A float tensor in [0, 1] as integers without loss where it can: uint8 ``round(255 x)``
+    when every value is a multiple of 1/255 (an 8-bit image, within
+    :data:`EIGHT_BIT_TOLERANCE`; always for float16 and bfloat16, which hold no more), else
+    uint16 ``round(65535 x)``."""
+    values = x.float()
+    finite = torch.isfinite(values)
+    if not finite.all():
+        raise ValueError(f"the burst tensor holds {int((~finite).sum())} NaN or infinite values")
+    check_float_burst(np.array([values.min().item(), values.max().item()]))
+    values = values.clamp(0, 1)
+    eight = torch.round(values * 255)
+    if x.dtype in (torch.float16, torch.bfloat16) or (values * 255 - eight).abs().max() <= EIGHT_BIT_TOLERANCE:
+        return eight.to(torch.uint8)
+    return torch.round(values * 65535).to(torch.int32)
+
+
+def burst_from_tensor(x: torch.Tensor) -> np.ndarray:
+    """The NumPy burst ``(N, H, W, 3)`` (an image: ``(H, W, 3)``) of a torch burst in torch's
+    layout, ``(N, 3, H, W)`` (an image: ``(3, H, W)``), on any device.
+
+    ``x``: uint8 (uint16 where torch has it), or float in [0, 1] (kornia's and LightGlue's
+    convention), converted to integers without loss where it can (:func:`_integer_frames`):
+    a float burst ``u8 / 255`` gives exactly the features of the uint8 burst ``u8``.
+    ``ValueError`` in one line for another layout, dtype or range."""
+    if x.ndim not in (3, 4) or x.shape[-3] != 3:
+        hint = " (channels last: use x.permute(0, 3, 1, 2), or pass the NumPy array)" if x.shape[-1:] == (3,) else ""
+        hint = hint or (
+            " (gray: repeat the channel, x.expand(-1, 3, -1, -1))" if x.ndim == 4 and x.shape[1] == 1 else ""
+        )
+        raise ValueError(
+            f"a burst tensor must be (N, 3, H, W), (3, H, W) or a batch (B, N, 3, H, W), got {tuple(x.shape)}{hint}"
+        )
+    x = x.detach()
+    if x.dtype in _INTEGER_TENSORS:
+        return _channels_last(x)
+    if not x.is_floating_point():
+        raise ValueError(f"a burst tensor must be uint8 or float in [0, 1], got {x.dtype}")
+    frames = _integer_frames(x)
+    array = _channels_last(frames)
+    return array if frames.dtype == torch.uint8 else array.astype(np.uint16)
+
+
+def as_burst(burst) -> np.ndarray:
+    """``burst`` as a NumPy array: a torch tensor through :func:`burst_from_tensor`."""
+    return burst_from_tensor(burst) if isinstance(burst, torch.Tensor) else np.asarray(burst)
+
+
 def memory_limit_bytes() -> int | None:
     """Half of the machine's physical memory (``None`` where the OS does not say)."""
     try:
@@ -188,8 +246,8 @@ class LBurst:
 
     Example::
 
-        model = LBurst.from_checkpoint("lburst-b5.pt")
-        feats = model.extract(burst)          # burst: (N, H, W, 3) uint8
+        model = LBurst.from_checkpoint("lburst-b5.pt").to("cuda")
+        feats = model.extract(burst)          # burst: (N, H, W, 3) uint8, or a tensor (N, 3, H, W)
         feats["keypoints"]                    # (K, 2) float32, x, y
     """
 
@@ -216,7 +274,7 @@ class LBurst:
         given)."""
         if net is None and runner is None:
             raise ValueError("give a network or a runner")
-        self.device = check_device(device)
+        self._device = check_device(device)
         self.net = net.eval().to(self.device) if net is not None else None
         self.frames = net.config.frames if net is not None else int(frames)
         self.frame_order = frame_order
@@ -241,6 +299,32 @@ class LBurst:
                     f"{len(self.descriptor_mean)}) matrix, got shape {tuple(matrix.shape)}"
                 )
             self.descriptor_whitening = matrix.to(self.device)
+
+    @property
+    def device(self) -> torch.device:
+        """The torch device the network runs on (set at construction, changed by :meth:`to`)."""
+        return self._device
+
+    def to(self, device: str | torch.device) -> "LBurst":
+        """Move the network and the descriptor whitening to ``device`` (``'cuda'``, ``'cpu'``,
+        a ``torch.device``) and return this LBurst, as :meth:`torch.nn.Module.to` returns the
+        module.  ``ValueError`` for a device that is not there, and for any device but the CPU
+        when the network runs on a runtime other than torch (ONNX Runtime, OpenVINO)."""
+        if not isinstance(device, (str, torch.device)):
+            raise ValueError(f"LBurst.to takes a device (a str or torch.device), got {device!r}")
+        movable = self._runner is None or isinstance(self._runner, torch.nn.Module)
+        if not movable and str(device).split(":")[0] != "cpu":
+            raise ValueError(f"runtime {self.runtime!r} runs on the CPU only; load the weights with runtime='torch'")
+        device = check_device(device)
+        for module in (self.net, self._runner, *self._reduced.values()):
+            if isinstance(module, torch.nn.Module):
+                module.to(device)
+        if self.descriptor_mean is not None:
+            self.descriptor_mean = self.descriptor_mean.to(device)
+        if self.descriptor_whitening is not None:
+            self.descriptor_whitening = self.descriptor_whitening.to(device)
+        self._device = device
+        return self
 
     def check_whitening(self) -> None:
         """``ValueError`` unless the weights carry a descriptor whitening."""
@@ -357,7 +441,7 @@ class LBurst:
     def _input(self, burst: np.ndarray, cfg: MultiScaleConfig | None = None) -> tuple[torch.Tensor, float]:
         """The network's input for ``burst`` and the scale it is at: the full resolution
         (1.0), or, with ``cfg``, the first pyramid level that ``cfg`` uses (see :meth:`_reduce`)."""
-        burst = np.asarray(burst)
+        burst = as_burst(burst)
         if burst.ndim == 3:  # a single image
             burst = burst[None]
         if burst.ndim != 4 or burst.shape[-1] != 3:
@@ -412,14 +496,16 @@ class LBurst:
         return np.stack(frames), s
 
     @torch.inference_mode()
-    def dense(self, burst: np.ndarray, whiten: bool = False) -> Features:
-        """Dense outputs at the input's resolution (``whiten``: as :class:`MultiScaleConfig`).
+    def dense(self, burst: np.ndarray | torch.Tensor, whiten: bool = False) -> Features:
+        """Dense outputs at the input's resolution (``whiten``: as :class:`MultiScaleConfig`;
+        ``burst``: one burst, NumPy or torch, as :meth:`extract` takes it).
 
         Returns ``descriptors`` (H, W, D), ``repeatability`` (H, W) and
         ``reliability`` (H, W), float32 NumPy arrays.  ``ValueError`` before any work when
         they would need more than half of the machine's memory (:func:`dense_bytes`; a
         4000x3000 burst needs about 18 GB): use :meth:`extract`, or a smaller burst.
         """
+        burst = as_burst(burst)
         height, width = self._full_size(burst)
         need, limit = dense_bytes(height, width, self.descriptor_dim), memory_limit_bytes()
         if limit is not None and need > limit:
@@ -443,14 +529,25 @@ class LBurst:
         }
 
     @torch.inference_mode()
-    def extract(self, burst: np.ndarray, top_k: int | None = 4000, rotations: int = 1, **options) -> Features:
+    def extract(
+        self, burst: np.ndarray | torch.Tensor, top_k: int | None = 4000, rotations: int = 1, **options
+    ) -> Features | list[Features]:
         """Multi-scale keypoints and descriptors of the burst's common frame.
+
+        ``burst``: a NumPy burst ``(N, H, W, 3)`` uint8, uint16 or float in [0, 1], temporal
+        order (an image ``(H, W, 3)`` for a 1-frame network); or a torch tensor in torch's
+        layout, ``(N, 3, H, W)`` (an image ``(3, H, W)``) uint8 or float in [0, 1], as kornia
+        and LightGlue take images, on any device (:func:`burst_from_tensor`: a float tensor
+        ``u8 / 255`` gives exactly the features of the uint8 burst ``u8``); or a batch tensor
+        ``(B, N, 3, H, W)``, which returns a list of B features dicts (:meth:`extract_batch`).
+        ``ValueError`` in one line for another shape, dtype, value range or frame count.
 
         ``options`` are fields of :class:`MultiScaleConfig`.  Returns, sorted by
         decreasing score: ``keypoints`` (K, 2) float32 x, y (see the module
         docstring for the convention), ``scales`` (K,) (32 / level scale, as
-        published), ``scores`` (K,) = reliability x repeatability, and
-        ``descriptors`` (K, 128) float32, L2-normalised.
+        published), ``scores`` (K,) = reliability x repeatability,
+        ``descriptors`` (K, 128) float32, L2-normalised, and ``image_size`` (2,) int64,
+        the burst's (width, height) as LightGlue's.
 
         ``rotations`` 2, 4 or 8 also extracts from the burst turned by 180 degrees (2), by
         each quarter turn (4) or every 45 degrees (8; the odd ones bilinear, with reflected
@@ -460,6 +557,11 @@ class LBurst:
         sorted by it, then by score.  Matchers match views rotated against each other through
         these sets (:mod:`lburst.matching`): the cost of extraction grows ``rotations``-fold.
         """
+        if isinstance(burst, torch.Tensor) and burst.ndim == 5:
+            if rotations != 1:
+                return [self.extract(one, top_k, rotations, **options) for one in burst]
+            return self.extract_batch(burst, top_k, **options)
+        burst = as_burst(burst)
         if rotations != 1:
             return self._extract_turned(burst, top_k, rotations, **options)
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
@@ -488,21 +590,23 @@ class LBurst:
             feats["keypoints"] = map_points(feats["keypoints"], np.linalg.inv(to_turned))
             x, y = feats["keypoints"].T
             inside = np.flatnonzero((x >= -0.5) & (x <= width - 0.5) & (y >= -0.5) & (y <= height - 0.5))
-            feats = {key: value[inside[:top_k]] for key, value in feats.items()}  # by score, as extracted
+            feats = select(feats, inside[:top_k])  # by score, as extracted
             feats["rotations"] = np.full(len(feats["keypoints"]), deg, np.uint16)
             parts.append(feats)
-        return {key: np.concatenate([f[key] for f in parts]) for key in parts[0]}
+        return {**concatenate(parts), "image_size": image_size(width, height)}
 
     @torch.inference_mode()
     def extract_batch(self, bursts, top_k: int | None = 4000, **options) -> list[Features]:
         """:meth:`extract` of several bursts of one size, run through each pyramid level as
         one batch (what pays on a GPU; on a CPU it equals a loop over :meth:`extract`).
-        ``bursts``: a sequence of bursts, or an array ``(B, N, H, W, 3)``.  Each result equals
-        :meth:`extract` of that burst up to float rounding."""
+        ``bursts``: a sequence of bursts (NumPy or torch, as :meth:`extract` takes them), an
+        array ``(B, N, H, W, 3)`` or a tensor ``(B, N, 3, H, W)``.  Returns a list of B features
+        dicts (one for a batch of one); each equals :meth:`extract` of that burst up to float
+        rounding."""
         cfg = replace(MultiScaleConfig(), top_k=top_k, **options)
         if cfg.whiten:
             self.check_whitening()
-        bursts = list(bursts)
+        bursts = [as_burst(burst) for burst in bursts]
         if not bursts:
             return []
         sizes = {self._full_size(burst) for burst in bursts}
@@ -510,7 +614,8 @@ class LBurst:
             raise ValueError(f"extract_batch takes bursts of one size, got {sorted(sizes)}")
         inputs = [self._input(burst, cfg) for burst in bursts]
         x = torch.cat([x for x, _ in inputs])
-        return self._extract(x, cfg, sizes.pop(), inputs[0][1])
+        found = self._extract(x, cfg, sizes.pop(), inputs[0][1])
+        return found if isinstance(found, list) else [found]
 
     @staticmethod
     def _full_size(burst) -> tuple[int, int]:
@@ -573,7 +678,7 @@ class LBurst:
                 f"no pyramid level between max_size {cfg.max_size} and min_size {cfg.min_size} "
                 f"for a {width}x{height} image"
             )
-        results = [self._select(levels, cfg) for levels in found]
+        results = [{**self._select(levels, cfg), "image_size": image_size(width, height)} for levels in found]
         return results[0] if batch == 1 else results
 
     def _select(self, levels: list[tuple], cfg: MultiScaleConfig) -> Features:

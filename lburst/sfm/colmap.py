@@ -13,7 +13,9 @@ inputs (failed ``CHECK``s); the parent reads the files the child leaves in ``JOB
   indices, ``inl_<q>`` (M_q, 2) keypoint indices of the inlier matches COLMAP kept),
   ``model/`` (COLMAP binary model), ``model.ply`` and ``output.json``
   (:func:`summarize`: registered images with world-to-camera ``R``, ``t`` and camera;
-  ``verify_seconds`` and ``map_seconds``, the wall time of verification and of the mapper).
+  ``verify_seconds`` and ``map_seconds``, the wall time of verification and of the mapper),
+  and ``stages.txt`` (:class:`StageLog`), each stage's start and end as it happens, which
+  the parent reports while it waits (:func:`run_job_subprocess`).
 
 Note: ``cv2`` is imported before ``pycolmap`` on purpose: importing pycolmap first makes
 later PNG writes by OpenCV (or PIL) in the same process abort with ``free(): invalid
@@ -22,6 +24,7 @@ pointer`` (their bundled zlib/libpng clash).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -31,6 +34,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Callable, ContextManager, Iterator
 
 import numpy as np
 
@@ -54,6 +58,77 @@ def opencv_path(path: str | Path) -> str:
 
 
 DEFAULT_FOCAL_FACTOR = 1.2  # COLMAP's own default prior: f = 1.2 * max(W, H)
+STAGE_FILE = "stages.txt"
+HEARTBEAT_SECONDS = 10.0  # a stage that runs longer is reported as still running this often
+POLL_SECONDS = 0.2  # how often the parent looks for new stage lines
+
+
+class StageLog:
+    """The child's record of its stages in ``job_dir/stages.txt``, one tab-separated line per
+    event, written and flushed as it happens: ``start NAME`` and ``end NAME SECONDS``."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.write_text("")
+
+    def _write(self, *fields: str) -> None:
+        with open(self.path, "a") as f:
+            f.write("\t".join(fields) + "\n")
+
+    @contextlib.contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        """Record the block as stage ``name`` (its start, then its end with the seconds it took)."""
+        self._write("start", name)
+        start = time.perf_counter()
+        yield
+        self._write("end", name, f"{time.perf_counter() - start:.3f}")
+
+
+def _stage(stages: StageLog | None, name: str) -> ContextManager[None]:
+    """``stages.stage(name)``, or nothing without a log."""
+    return stages.stage(name) if stages is not None else contextlib.nullcontext()
+
+
+class StageReader:
+    """The parent's side of :class:`StageLog`: :meth:`poll` reports each stage that ended as
+    ``COLMAP NAME: SECONDS s``, and a stage that has run :data:`HEARTBEAT_SECONDS` since
+    the last line as ``COLMAP NAME: running, N s so far``."""
+
+    def __init__(self, path: str | Path, report: Callable[[str], None], clock: Callable[[], float] = time.monotonic):
+        self.path = Path(path)
+        self.report = report
+        self.clock = clock
+        self.offset = 0
+        self.running: tuple[str, float] | None = None  # the stage under way and when it started
+        self.last_line = clock()
+
+    def poll(self) -> None:
+        """Report what the log gained since the last call, or a heartbeat."""
+        for fields in self._new_lines():
+            if fields[0] == "start" and len(fields) == 2:
+                self.running = (fields[1], self.clock())
+            elif fields[0] == "end" and len(fields) == 3:
+                self.running = None
+                self._say(f"COLMAP {fields[1]}: {float(fields[2]):.1f} s")
+        if self.running is not None and self.clock() - self.last_line >= HEARTBEAT_SECONDS:
+            name, start = self.running
+            self._say(f"COLMAP {name}: running, {self.clock() - start:.0f} s so far")
+
+    def _say(self, line: str) -> None:
+        self.report(line)
+        self.last_line = self.clock()
+
+    def _new_lines(self) -> list[list[str]]:
+        """The complete lines written since the last call, split into fields."""
+        try:
+            with open(self.path, "rb") as f:
+                f.seek(self.offset)
+                data = f.read()
+        except FileNotFoundError:
+            return []
+        complete = data[: data.rfind(b"\n") + 1]
+        self.offset += len(complete)
+        return [line.split("\t") for line in complete.decode(errors="replace").splitlines() if line]
 
 
 class ColmapError(RuntimeError):
@@ -297,10 +372,15 @@ def refuse_pairs(db_path: str | Path, image_ids: list[int], pairs: np.ndarray) -
 
 
 def map_database(
-    db_path: str | Path, image_dir: str | Path, work_dir: str | Path, options: ColmapOptions
+    db_path: str | Path,
+    image_dir: str | Path,
+    work_dir: str | Path,
+    options: ColmapOptions,
+    stages: StageLog | None = None,
 ) -> pycolmap.Reconstruction | None:
     """Run the mapper; return the model with the most registered images (joined with the
-    others where ``options.join_models`` says so), or ``None`` if none."""
+    others where ``options.join_models`` says so), or ``None`` if none.  ``stages``: where
+    to record the mapping and the joining as stages."""
     pycolmap.set_random_seed(options.seed)
     threads = options.num_threads if options.mapper_threads is None else options.mapper_threads
     work_dir = Path(work_dir)
@@ -314,9 +394,11 @@ def map_database(
         opts.triangulation.ignore_two_view_tracks = not options.two_view_tracks
         opts.ba_refine_focal_length = options.refine_focal_length
         opts.ba_refine_extra_params = options.refine_extra_params
-        models = pycolmap.incremental_mapping(str(db_path), str(image_dir), str(work_dir), opts)
+        with _stage(stages, "mapping (incremental, with bundle adjustment)"):
+            models = pycolmap.incremental_mapping(str(db_path), str(image_dir), str(work_dir), opts)
         if len(models) > 1 and options.join_models:
-            return join_models(models.values(), db_path, image_dir, work_dir, opts)
+            with _stage(stages, f"joining {len(models)} models (triangulation, bundle adjustment)"):
+                return join_models(models.values(), db_path, image_dir, work_dir, opts)
     elif options.mapper == "global":
         opts = pycolmap.GlobalPipelineOptions()
         opts.num_threads = threads
@@ -324,7 +406,8 @@ def map_database(
         opts.min_model_size = options.min_model_size
         opts.mapper.bundle_adjustment.refine_focal_length = options.refine_focal_length
         opts.mapper.bundle_adjustment.refine_extra_params = options.refine_extra_params
-        models = pycolmap.global_mapping(str(db_path), str(image_dir), str(work_dir), opts)
+        with _stage(stages, "mapping (global, with bundle adjustment)"):
+            models = pycolmap.global_mapping(str(db_path), str(image_dir), str(work_dir), opts)
     else:
         raise ValueError(f"unknown mapper {options.mapper!r}: expected 'incremental' or 'global'")
     if not models:
@@ -396,22 +479,25 @@ def run_job(job_dir: str | Path) -> dict:
     pairs = data["pairs"].reshape(-1, 2)
     matches = [data[f"m_{p}"] for p in range(len(pairs))]
     db_path = job_dir / "database.db"
-    image_ids = write_database(db_path, job, keypoints, pairs, matches)
-    start = time.perf_counter()
-    verify(db_path, job.options)
-    verified = time.perf_counter()
-    v_pairs, inliers = read_inliers(db_path, image_ids)
-    keep, threshold = loop_test(
-        v_pairs,
-        [len(m) for m in inliers],
-        job.options.near,
-        job.options.loop_inlier_fraction,
-        job.options.min_num_inliers,
-    )
-    refused = v_pairs[~keep]
-    refused_counts = np.array([len(m) for m, k in zip(inliers, keep) if not k], dtype=np.int64)
-    if len(refused):
-        refuse_pairs(db_path, image_ids, refused)
+    stages = StageLog(job_dir / STAGE_FILE)
+    with stages.stage(f"feature and match import ({len(job.names)} images, {len(pairs)} pairs)"):
+        image_ids = write_database(db_path, job, keypoints, pairs, matches)
+    with stages.stage("geometric verification"):
+        start = time.perf_counter()
+        verify(db_path, job.options)
+        verified = time.perf_counter()
+        v_pairs, inliers = read_inliers(db_path, image_ids)
+        keep, threshold = loop_test(
+            v_pairs,
+            [len(m) for m in inliers],
+            job.options.near,
+            job.options.loop_inlier_fraction,
+            job.options.min_num_inliers,
+        )
+        refused = v_pairs[~keep]
+        refused_counts = np.array([len(m) for m, k in zip(inliers, keep) if not k], dtype=np.int64)
+        if len(refused):
+            refuse_pairs(db_path, image_ids, refused)
     v_pairs, inliers = v_pairs[keep], [m for m, k in zip(inliers, keep) if k]
     with atomic_path(job_dir / "verified.npz") as tmp:
         np.savez(
@@ -422,10 +508,11 @@ def run_job(job_dir: str | Path) -> dict:
             **{f"inl_{q}": m for q, m in enumerate(inliers)},
         )
     mapping = time.perf_counter()
-    rec = map_database(db_path, job.image_dir, job_dir / "mapper", job.options) if len(v_pairs) else None
+    rec = map_database(db_path, job.image_dir, job_dir / "mapper", job.options, stages) if len(v_pairs) else None
     mapped = time.perf_counter()
     if rec is not None:
-        export_model(rec, job_dir)
+        with stages.stage("export"):
+            export_model(rec, job_dir)
     summary = summarize(rec)
     summary["first_last_points3D"] = shared_points3D(rec, job.names[0], job.names[-1])
     summary.update(verify_seconds=round(verified - start, 3), map_seconds=round(mapped - mapping, 3))
@@ -436,25 +523,54 @@ def run_job(job_dir: str | Path) -> dict:
     return summary
 
 
-def run_job_subprocess(job_dir: str | Path, timeout: float | None = None) -> dict:
+def _wait(proc: subprocess.Popen, timeout: float | None, reader: StageReader | None) -> None:
+    """Wait for ``proc``, polling ``reader`` meanwhile; ``subprocess.TimeoutExpired`` after ``timeout`` s."""
+    deadline = None if timeout is None else time.monotonic() + timeout
+    while True:
+        wait = POLL_SECONDS if deadline is None else min(POLL_SECONDS, max(deadline - time.monotonic(), 0))
+        try:
+            proc.wait(timeout=wait)
+            break
+        except subprocess.TimeoutExpired:
+            if reader is not None:
+                reader.poll()
+            if deadline is not None and time.monotonic() >= deadline:
+                raise
+    if reader is not None:
+        reader.poll()
+
+
+def run_job_subprocess(
+    job_dir: str | Path, timeout: float | None = None, report: Callable[[str], None] | None = None
+) -> dict:
     """Run :func:`run_job` in a child Python process (COLMAP's log goes to ``job_dir/colmap.log``).
 
-    Raises ``ColmapError`` with the end of the log when the child fails or aborts.
+    ``report``: called with a line as each stage ends (:class:`StageReader`: the feature
+    import, the geometric verification, the mapping with its bundle adjustments, any
+    joining of models, the export, each with its seconds), and every
+    :data:`HEARTBEAT_SECONDS` while a stage runs on.  Raises ``ColmapError`` with the end of
+    the log when the child fails or aborts.
     """
     job_dir = Path(job_dir)
     with folder_lock(job_dir):  # one COLMAP per job folder; the child dies with this process
         (job_dir / "output.json").unlink(missing_ok=True)
+        (job_dir / STAGE_FILE).unlink(missing_ok=True)
         log_path = job_dir / "colmap.log"
+        reader = StageReader(job_dir / STAGE_FILE, report) if report is not None else None
         with open(log_path, "w") as log:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "lburst.cli.colmap_job", str(job_dir), "--parent", str(os.getpid())],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+            )
             try:
-                proc = subprocess.run(
-                    [sys.executable, "-m", "lburst.cli.colmap_job", str(job_dir), "--parent", str(os.getpid())],
-                    stdout=log,
-                    stderr=subprocess.STDOUT,
-                    timeout=timeout,
-                )
+                _wait(proc, timeout, reader)
             except subprocess.TimeoutExpired as err:
                 raise ColmapError(f"COLMAP did not finish in {timeout} s (log: {log_path})") from err
+            finally:
+                if proc.poll() is None:  # timed out or interrupted: the child goes too
+                    proc.kill()
+                    proc.wait()
         if proc.returncode != 0 or not (job_dir / "output.json").is_file():
             how = (
                 f"was killed by signal {-proc.returncode}" if proc.returncode < 0 else f"exited with {proc.returncode}"
