@@ -1,11 +1,13 @@
 """Optional dependencies, imported when first used.
 
 ``pip install lburst`` gives feature extraction (numpy, torch, opencv, scipy, h5py,
-tqdm, scikit-image). The rest comes with extras: ``lburst[sfm]`` (pycolmap, scikit-image),
-``lburst[onnx]`` (onnx, onnxruntime, onnxscript), ``lburst[viz]`` (matplotlib),
-``lburst[tensorboard]``. A module that needs one calls :func:`require`, or holds a
-:class:`LazyModule`, so that importing it costs nothing and a missing package gives a
-one-line message naming the extra.
+tqdm, scikit-image, openvino). The rest comes with extras: ``lburst[sfm]`` (pycolmap,
+scikit-image), ``lburst[onnx]`` (onnx, onnxruntime, onnxscript), ``lburst[openvino]``
+(nncf), ``lburst[viz]`` (matplotlib), ``lburst[tensorboard]``, ``lburst[video]`` (PyAV:
+reading and writing recordings' videos), ``lburst[raw]`` (rawpy, tifffile: DNG frames)
+and ``lburst[evo]`` (evo, to compare trajectories; lburst's own ATE needs none). A module
+that needs one calls :func:`require`, or holds a :class:`LazyModule`, so that importing it
+costs nothing and a missing package gives a one-line message naming the extra.
 """
 
 from __future__ import annotations
@@ -24,6 +26,10 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "tensorboard": ("tensorboard", "tensorboard"),
     "openvino": ("openvino", "openvino"),
     "nncf": ("nncf", "openvino"),
+    "av": ("av", "video"),
+    "rawpy": ("rawpy", "raw"),
+    "tifffile": ("tifffile", "raw"),
+    "evo": ("evo", "evo"),
 }
 
 

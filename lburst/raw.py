@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.extras import require
 from lburst.io import BurstError
 from lburst.numbers import check_real
 
@@ -49,7 +50,7 @@ LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 def read_dng(path: str | Path) -> np.ndarray:
     """A DNG file as linear RGB ``(H, W, 3)`` uint16 (module docstring); ``BurstError`` naming the file."""
-    import rawpy
+    rawpy = require("rawpy", "reading DNG frames")
 
     path = Path(path)
     if not path.is_file():
@@ -79,7 +80,7 @@ def dng_problem(path: Path) -> str | None:
     ``DNGVersion`` tag and a raw image (main IFD or SubIFD) that is a CFA mosaic
     (``PhotometricInterpretation`` 32803 with ``CFARepeatPatternDim``/``CFAPattern``) or
     linear raw (34892).  LibRaw itself would guess a Bayer pattern for any grey TIFF."""
-    import tifffile
+    tifffile = require("tifffile", "reading DNG frames")
 
     try:
         with tifffile.TiffFile(path) as tif:

@@ -1,7 +1,11 @@
 """Recordings as burst sources: a video or a folder of consecutive frames, cut into keyframe bursts.
 
 A *recording* is a video file (decoded with PyAV, one frame at a time) or a folder of
-consecutive frames (PNG/JPEG/TIFF, 8 or 16 bit, or DNG), sorted naturally.  Frame
+consecutive frames (PNG/JPEG/TIFF, 8 or 16 bit, or DNG), sorted naturally.  A folder is
+one when it has a ``meta.json`` or DNG frames, or, with
+:attr:`RecordingOptions.frame_folders` (the command line's ``--every`` or ``--motion``),
+any folder with frame files in it (:func:`is_recording`); without them a folder of
+plain frames is one burst.  Frame
 *indices* count frames from the start: for a video ``round((time - t0) * fps)`` from
 the frames' timestamps, for a folder the last number in each file name (so a gap in the
 numbering is a dropped frame), or the position when the names carry no distinct
@@ -25,7 +29,8 @@ for the recording (:mod:`lburst.raw`); 8-bit frames pass unchanged.
 Sidecar files (optional), next to a video ``X.mp4`` or inside a folder ``X/``:
 
 - ``X.meta.json`` / ``X/meta.json``: ``{"fps": ..., "camera": COLMAP camera dict}``
-  (fps of a frame folder, default 30; the camera's intrinsics as a prior);
+  (fps of a frame folder, default 30; the camera's intrinsics, taken as the calibration;
+  without them COLMAP estimates the camera);
 - ``X.gt.txt`` / ``X/gt.txt``: ground-truth camera poses per frame, TUM format
   (:mod:`lburst.tum`), timestamps on the recording's clock.
 
@@ -44,6 +49,7 @@ from typing import Iterator
 
 import numpy as np
 
+from lburst.extras import require
 from lburst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_key, read_image
 from lburst.keyframes import MotionGate, MotionTracker, thumbnail
 from lburst.numbers import check_integer, check_real
@@ -64,6 +70,9 @@ class RecordingOptions:
         fps: frame rate of a frame folder (default: its ``meta.json``, else 30).
         normalisation: brightness normalisation of linear 16-bit frames.
         max_frames: stop reading after this many frames (``None``: all).
+        frame_folders: a folder of plain frames (PNG/JPEG/TIFF, without ``meta.json``) is
+            a recording too (:func:`is_recording`); the command line sets it when
+            ``--every`` or ``--motion`` is given.  It changes no burst (not in :meth:`signature`).
     """
 
     burst: int = 5
@@ -73,6 +82,7 @@ class RecordingOptions:
     normalisation: Normalisation = field(default_factory=Normalisation)
     max_frames: int | None = None
     motion: MotionGate | None = None
+    frame_folders: bool = False
 
     def __post_init__(self) -> None:
         check_integer(self.burst, "--burst", 1, 99)
@@ -152,13 +162,19 @@ def frame_files(folder: Path) -> list[Path]:
     )
 
 
-def is_recording(path: str | Path) -> bool:
-    """A video file, or a folder with a ``meta.json`` or with DNG frames (other folders are scenes or bursts)."""
+def is_recording(path: str | Path, options: RecordingOptions | None = None) -> bool:
+    """A video file, or a folder with a ``meta.json`` or with DNG frames; with
+    ``options.frame_folders`` also a folder with frame files (PNG/JPEG/TIFF) in it.  Other
+    folders are scenes or bursts."""
     path = Path(path)
     if path.suffix.lower() in VIDEO_SUFFIXES and not path.is_dir():
         return True
-    return path.is_dir() and (
-        (path / "meta.json").is_file() or any(p.suffix.lower() in RAW_SUFFIXES for p in path.iterdir())
+    if not path.is_dir():
+        return False
+    if (path / "meta.json").is_file() or any(p.suffix.lower() in RAW_SUFFIXES for p in path.iterdir()):
+        return True
+    return bool(options is not None and options.frame_folders) and any(
+        p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".") for p in path.iterdir()
     )
 
 
@@ -207,7 +223,7 @@ class Recording:
         return path if path.is_file() else None
 
     def _open_video(self):
-        import av
+        av = require("av", "reading a video")
 
         try:
             container = av.open(str(self.path))
@@ -267,7 +283,7 @@ class Recording:
             yield Frame(index, index / self.fps, read_frame(path), str(path))
 
     def _video_frames(self) -> Iterator[Frame]:
-        import av
+        av = require("av", "reading a video")
 
         container = self._open_video()
         decoded, t0, last = 0, None, -1

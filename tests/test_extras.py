@@ -105,3 +105,54 @@ def test_plots_need_matplotlib_only_when_drawn(tmp_path):
     kp = np.array([[3.0, 4.0], [10.0, 12.0]])
     plot_matches(img, img, kp, kp, tmp_path / "m.png", "test")
     assert (tmp_path / "m.png").stat().st_size > 0
+
+
+def _cli(args: list[str], block: tuple[str, ...]) -> subprocess.CompletedProcess:
+    return run_python(f"from lburst.cli import main\nraise SystemExit(main({args!r}))\n", block=block)
+
+
+def test_simulating_a_video_without_pyav_says_what_to_install(tmp_path):
+    out = _cli(["simulate", "flight", "--video", str(tmp_path / "f.mp4"), "--bursts", "2", "--size", "64x48"], ("av",))
+    assert out.returncode == 2
+    assert out.stderr.strip() == "lburst: writing a video (--video) needs av: pip install 'lburst[video]'"
+    assert not (tmp_path / "f.mp4").exists()
+
+
+@pytest.mark.parametrize("command", ["extract", "reconstruct"])
+def test_reading_a_video_without_pyav_says_what_to_install(tmp_path, command):
+    video = tmp_path / "night.mp4"
+    video.write_bytes(b"\x00" * 64)  # never opened: PyAV is missing
+    out = _cli([command, str(video), "--every", "8", "--method", "orb", "--out", str(tmp_path / "o")], ("av",))
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines()[-1] == "lburst: reading a video needs av: pip install 'lburst[video]'"
+    assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("command", ["extract", "reconstruct"])
+def test_reading_dng_frames_without_rawpy_says_what_to_install(tmp_path, command):
+    folder = tmp_path / "night_dng"
+    folder.mkdir()
+    for i in range(3):
+        (folder / f"frame_{i:06d}.dng").write_bytes(b"II*\x00")  # never parsed: rawpy is missing
+    out = _cli(
+        [command, str(folder), "--every", "1", "--burst", "1", "--method", "orb", "--out", str(tmp_path / "o")],
+        ("rawpy",),
+    )
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines()[-1] == "lburst: reading DNG frames needs rawpy: pip install 'lburst[raw]'"
+    assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize(("module", "extra"), [("av", "video"), ("rawpy", "raw"), ("tifffile", "raw"), ("evo", "evo")])
+def test_every_extra_named_is_one_pyproject_defines(module, extra):
+    from pathlib import Path
+
+    from lburst.extras import EXTRAS
+
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11+
+
+    assert EXTRAS[module][1] == extra
+    pyproject = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    extras = pyproject["project"]["optional-dependencies"]
+    assert set(extra for _, extra in EXTRAS.values()) <= set(extras)
+    assert any(req.startswith(EXTRAS[module][0]) for req in extras[extra])

@@ -62,8 +62,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "bursts",
         nargs="+",
         type=Path,
-        help="burst folders, images or videos (a whole video is one burst unless --every or --motion is given), "
-        "or recordings: features of each keyframe burst go to OUT/<recording>/<keyframe>.npz",
+        help="burst folders, images or videos (a whole video, or a folder of frames without meta.json, is one "
+        "burst unless --every or --motion is given), or recordings: features of each keyframe burst go to "
+        "OUT/<recording>/<keyframe>.npz",
     )
     p.add_argument("--out", type=Path, required=True, help="output folder for <burst>.npz")
     p.add_argument("--weights", help="checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
@@ -230,12 +231,12 @@ def main(args: argparse.Namespace) -> int:
     names: dict[str, Path] = {}
     done = 0
     try:
-        recording_options(args)
+        cut = recording_options(args)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     for path in tqdm(args.bursts, desc=f"extract {spec}", unit="burst"):
-        if is_recording(path) and (path.is_dir() or args.every is not None or args.motion is not None):
+        if is_recording(path, cut) and (path.is_dir() or cut.frame_folders):
             new, old, problem = extract_recording(path, extractor, args, method, finished)
             tqdm.write(f"{path}: {new} keyframes extracted, {old} already done")
             done += 1

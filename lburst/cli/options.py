@@ -13,7 +13,10 @@ from lburst.sources import DEFAULT_FPS, Normalisation, RecordingOptions
 def add_recording_arguments(p) -> None:
     """The command-line options of :class:`RecordingOptions` (for commands that read recordings);
     ``--every`` stays ``None`` when not given (:func:`recording_options` reads it as 10)."""
-    g = p.add_argument_group("recordings (a video, or a folder of consecutive frames or DNGs, with a meta.json)")
+    g = p.add_argument_group(
+        "recordings (a video, or a folder of consecutive frames or DNGs; a folder of PNG/JPEG/TIFF frames "
+        "without meta.json is one only with --every or --motion)"
+    )
     g.add_argument(
         "--burst",
         dest="burst_frames",
@@ -50,7 +53,8 @@ def add_recording_arguments(p) -> None:
 
 
 def recording_options(args) -> RecordingOptions:
-    """:class:`RecordingOptions` from :func:`add_recording_arguments`' options (``ValueError`` if bad)."""
+    """:class:`RecordingOptions` from :func:`add_recording_arguments`' options (``ValueError`` if bad);
+    ``--every`` or ``--motion`` make a folder of plain frames a recording (``frame_folders``)."""
     if args.every is not None and args.motion is not None:
         raise ValueError("give --every or --motion, not both")
     return RecordingOptions(
@@ -60,6 +64,7 @@ def recording_options(args) -> RecordingOptions:
         fps=args.fps,
         normalisation=Normalisation(gain=args.raw_gain, curve=args.raw_curve),
         motion=None if args.motion is None else MotionGate(args.motion),
+        frame_folders=args.every is not None or args.motion is not None,
     )
 
 

@@ -19,7 +19,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "burst",
         type=Path,
         help="burst folder, image or video, or a recording (video, or a folder of "
-        "frames or DNGs with meta.json): then the burst centred on --frame",
+        "frames or DNGs with meta.json, or any folder of frames with --frame): then the burst centred on --frame",
     )
     p.add_argument(
         "--frame", type=integer(0), help="recording: the keyframe's frame index (a video without it is one burst)"
@@ -45,9 +45,10 @@ def load_model(weights: str | None, frame_order: str = "temporal", device: str |
 
 
 def _is_recording(args: argparse.Namespace) -> bool:
-    from lburst.sources import is_recording
+    from lburst.sources import RecordingOptions, is_recording
 
-    return is_recording(args.burst) and (args.burst.is_dir() or args.frame is not None)
+    options = RecordingOptions(frame_folders=args.frame is not None)  # --frame: a folder of frames is a recording
+    return is_recording(args.burst, options) and (args.burst.is_dir() or args.frame is not None)
 
 
 def load_recording_burst(args: argparse.Namespace):

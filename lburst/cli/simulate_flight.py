@@ -1,5 +1,5 @@
 """``lburst simulate flight``: the synthetic night flight scene (:mod:`lburst.scenes.night_flight`),
-as bursts, a video or DNG frames (:mod:`lburst.scenes.flight_recording`); an arc (``--turn``,
+as bursts, a video, DNG frames or PNG frames (:mod:`lburst.scenes.flight_recording`); an arc (``--turn``,
 ``--loop``) or a lawnmower survey (``--survey LINES``, whose path sets the number of bursts,
 so ``--bursts`` is refused with it)."""
 
@@ -26,13 +26,19 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         type=Path,
         help="also (or only) write the flight as a continuous MP4 video, with "
         "per-frame ground truth X.gt.txt (TUM) and X.meta.json (camera, fps); with --noise "
-        "lowlight:... its frames are the camera's processing of the --dng version's raw frames",
+        "lowlight:... or sensor:... its frames are the camera's processing of the --dng version's raw frames",
     )
     p.add_argument(
         "--dng",
         type=Path,
-        help="also (or only) write the flight as a folder of 12-bit Bayer DNG frames "
-        "(needs --noise lowlight:...), with gt.txt and meta.json inside",
+        help="also (or only) write the flight as a folder of Bayer DNG frames, with gt.txt and meta.json inside; "
+        "needs a sensor: --noise lowlight:... (12-bit) or sensor:NAME@ISO (that sensor's bit depth and black level)",
+    )
+    p.add_argument(
+        "--png",
+        type=Path,
+        help="also (or only) write the flight as a folder of 8-bit PNG frames, the --video frames before "
+        "encoding, with gt.txt and meta.json inside",
     )
     p.add_argument(
         "--crf", type=integer(0, 51), default=16, help="H.264 quality of --video (lower: better; default 16)"
@@ -80,7 +86,11 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--frames", type=integer(1, 99), default=default.frames_per_burst, help="frames per burst (odd)")
     p.add_argument("--size", default=f"{default.width}x{default.height}", help="WIDTHxHEIGHT")
-    p.add_argument("--noise", default=default.noise, help="noise spec, e.g. gaussian:50 (default: none)")
+    p.add_argument(
+        "--noise",
+        default=default.noise,
+        help="noise spec, e.g. gaussian:50, lowlight:night or sensor:imx686@6400,photons=20 (default: none)",
+    )
     p.add_argument("--exposure", type=real(0, low_open=True), default=default.exposure, help="gain before noise")
     p.add_argument("--daylight", action="store_true", help="no night lighting")
     p.add_argument("--supersample", type=integer(1, 16), default=default.supersample, help="anti-aliasing factor")
@@ -129,8 +139,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"error: two scene folders given: {args.out_dir} and --out {args.out}", file=sys.stderr)
         return 2
     args.out = args.out or args.out_dir
-    if args.out is None and args.video is None and args.dng is None:
-        print("error: give a scene folder OUT, --video FILE.mp4 or --dng FOLDER", file=sys.stderr)
+    if args.out is None and args.video is None and args.dng is None and args.png is None:
+        print("error: give a scene folder OUT, --video FILE.mp4, --dng FOLDER or --png FOLDER", file=sys.stderr)
         return 2
     conflict = survey_conflict(args)
     if conflict:
@@ -145,7 +155,7 @@ def main(args: argparse.Namespace) -> int:
                 f"{args.out}: {path}{cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, "
                 f"trajectory {ref.length:.1f} m"
             )
-        if args.video is not None or args.dng is not None:
+        if args.video is not None or args.dng is not None or args.png is not None:
             frames = f"{recording.frame_count(cfg)} frames at {recording.fps(cfg):g} fps, {width}x{height}"
             if args.video is not None:
                 recording.write_flight_video(args.video, cfg, crf=args.crf)
@@ -153,6 +163,9 @@ def main(args: argparse.Namespace) -> int:
             if args.dng is not None:
                 recording.write_flight_dng(args.dng, cfg)
                 print(f"{args.dng}: {frames} (DNG); ground truth {recording.ground_truth_path(args.dng)}")
+            if args.png is not None:
+                recording.write_flight_png(args.png, cfg)
+                print(f"{args.png}: {frames} (PNG); ground truth {recording.ground_truth_path(args.png)}")
     except (ValueError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

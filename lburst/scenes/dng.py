@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.extras import require
 from lburst.io import atomic_path
 
 # XYZ (D65) -> linear sRGB, IEC 61966-2-1
@@ -47,7 +48,7 @@ def write_dng(
     model: str = "lburst synthetic camera",
 ) -> Path:
     """Write the Bayer mosaic ``cfa`` (H, W) uint16 (raw counts, black level included) as a DNG, atomically."""
-    import tifffile
+    tifffile = require("tifffile", "writing DNG frames")
 
     cfa = np.ascontiguousarray(cfa, dtype=np.uint16)
     if cfa.ndim != 2 or cfa.shape[0] % 2 or cfa.shape[1] % 2:
