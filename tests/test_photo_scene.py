@@ -98,7 +98,13 @@ def test_reference_options_are_kept_and_a_change_remakes_the_reference(photos):
     assert reference_options_used(out) == {} and (out / REFERENCE_DIR / "options.json").is_file()
     assert len({str(c["params"]) for c in reference_cameras(out / "reference.json").values()}) == 6
     # the CLI's defaults are the defaults: a reference made before the options existed is reused
-    assert non_default_options({"single_camera": False, "fix_intrinsics": False, "num_threads": 2}) == {}
+    import argparse
+
+    from lburst.cli.simulate_scene import configure_parser, reference_options
+
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    assert non_default_options(reference_options(parser.parse_args(["photos", "--out", "scene"]))) == {}
 
 
 def test_cli_reference_options():

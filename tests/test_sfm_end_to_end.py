@@ -62,7 +62,7 @@ def test_global_mapper_registers_the_flight(flight, tmp_path):
     assert result.metrics["ate_percent"] < 1.0
 
 
-def test_the_command_line_names_the_folder_pycolmap_opens(flight, tmp_path, capsys):
+def test_the_command_line_names_the_folder_pycolmap_opens_and_reports_each_stage(flight, tmp_path, capsys):
     import re
 
     import pycolmap
@@ -71,5 +71,16 @@ def test_the_command_line_names_the_folder_pycolmap_opens(flight, tmp_path, caps
 
     out = tmp_path / "cli"
     assert main(["reconstruct", str(flight), "--method", "sift,max_features=1500", "--out", str(out)]) == 0
-    folder = re.search(r"model in (\S+)", capsys.readouterr().out).group(1)
+    printed = capsys.readouterr()
+    folder = re.search(r"model in (\S+)", printed.out).group(1)
     assert pycolmap.Reconstruction(folder).num_reg_images() == 5
+    # a line per stage as it ends, with its seconds, so that no stage runs on in silence
+    lines = re.split(r"[\r\n]+", printed.err)  # tqdm bars redraw with carriage returns
+    stages = [found.group(1) for found in map(re.compile(r"(.+): \d+\.\d s").fullmatch, lines) if found]
+    assert stages == [
+        "matching (10 pairs, mnn)",
+        "COLMAP feature and match import (5 images, 10 pairs)",
+        "COLMAP geometric verification",
+        "COLMAP mapping (incremental, with bundle adjustment)",
+        "COLMAP export",
+    ]

@@ -20,7 +20,12 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fallback-exhaustive", action="store_true")
     parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
     parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
-    parser.add_argument("--single-camera", action="store_true", help="one camera for all images of a scene")
+    parser.add_argument(
+        "--single-camera",
+        action="store_const",
+        const=True,
+        help="one camera for all images of a scene (a recording has one by default)",
+    )
     parser.add_argument("--threads", type=integer(1, 1024), default=2)
     add_matcher_argument(parser)
     parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")

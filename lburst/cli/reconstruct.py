@@ -26,7 +26,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "scene",
         help="scene folder (one sub-folder of frames per burst, or single images), "
-        "or a recording: a video, or a folder of DNG frames",
+        "or a recording: a video, a folder of DNG frames or with a meta.json, or, with --every or --motion, "
+        "any folder of frames",
     )
     parser.add_argument(
         "--method", default="lburst", help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...)"
@@ -74,13 +75,24 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--camera",
         choices=("auto", "default", "reference"),
         default="auto",
-        help="intrinsics prior: EXIF or default (auto), default, or the scene's reference.json",
+        help="intrinsics: auto is the scene's calibration, held fixed (a recording's meta.json camera, or a "
+        "reference.json that is calibrated or synthetic), else EXIF, else default; default is COLMAP's guess; "
+        "reference is the scene's reference.json cameras as a prior (refined unless --fix-intrinsics)",
     )
     parser.add_argument("--camera-model", default="SIMPLE_RADIAL")
-    parser.add_argument(
+    cameras = parser.add_mutually_exclusive_group()
+    cameras.add_argument(
         "--single-camera",
-        action="store_true",
-        help="one camera for all images (when their priors agree) instead of one per image",
+        action="store_const",
+        const=True,
+        help="one camera for all images (when their priors agree; the default for a recording)",
+    )
+    cameras.add_argument(
+        "--camera-per-image",
+        dest="single_camera",
+        action="store_const",
+        const=False,
+        help="one camera per image (the default for a scene of bursts or photos)",
     )
     parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
     parser.add_argument("--threads", type=integer(1, 1024), default=2)
@@ -140,6 +152,8 @@ def main(args: argparse.Namespace) -> int:
     print(
         f"{len(result.registered)}/{len(result.names)} images registered; model in {model} (pycolmap.Reconstruction opens it)"
     )
+    if result.metrics.get("camera"):
+        print(f"camera: {result.metrics['camera']}")
     if result.source_error:
         print(
             f"lburst reconstruct: {result.source_error} (the {len(result.names)} keyframes before it were used)",

@@ -42,6 +42,15 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def reference_options(args: argparse.Namespace) -> dict:
+    """The :class:`lburst.sfm.ReconstructOptions` fields of the clean reference, from the options."""
+    return {
+        "single_camera": args.reference_single_camera or None,  # None: the default, one camera per photo
+        "fix_intrinsics": args.reference_fix_intrinsics,
+        "num_threads": args.reference_threads,
+    }
+
+
 def main(args: argparse.Namespace) -> int:
     from lburst.sfm.reconstruct import ReconstructionError
 
@@ -54,11 +63,7 @@ def main(args: argparse.Namespace) -> int:
             args.noise,
             args.seed,
             reference=not args.no_reference,
-            reference_options={
-                "single_camera": args.reference_single_camera,
-                "fix_intrinsics": args.reference_fix_intrinsics,
-                "num_threads": args.reference_threads,
-            },
+            reference_options=reference_options(args),
         )
     except (SceneError, ReconstructionError, ValueError) as err:
         print(f"lburst simulate scene: {err}", file=sys.stderr)

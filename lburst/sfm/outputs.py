@@ -10,7 +10,9 @@ In the output folder ``OUT``:
   ``OUT/images`` (``<keyframe>.png``): per image ``keypoints`` (K, 2) (pixel centres at
   integers, as hloc), ``descriptors`` (D, K), ``scores``, ``image_size``; per pair
   ``matches.h5[name0][name1]`` with ``matches0`` (K0,) int32 (index into image 1's
-  keypoints, -1: unmatched) and ``matching_scores0`` (1 for a mutual nearest neighbour);
+  keypoints, -1: unmatched) and ``matching_scores0`` (K0,) float16, the matcher's score of
+  each match (:meth:`lburst.matching.DescriptorMatcher.match`: the similarity of the two
+  descriptors in [-1, 1]; 0: unmatched);
 - ``report.md`` with ``trajectory.png`` (top-down, Sim3-aligned to the ground truth
   when there is one) and ``registration.png`` (3D points per keyframe; grey: not
   registered), the 3D points the first and last keyframes share (a closed loop ties them),
@@ -54,9 +56,14 @@ def write_hloc(
     shapes: list[tuple[int, int]],
     pairs: list[tuple[int, int]],
     matches: list[np.ndarray],
+    scores: list[np.ndarray] | None = None,
 ) -> None:
-    """hloc's ``features.h5``, ``matches.h5`` and ``pairs.txt`` (module docstring), each written atomically."""
+    """hloc's ``features.h5``, ``matches.h5`` and ``pairs.txt`` (module docstring), each written
+    atomically.  ``scores[p]`` (M_p,): the scores of pair ``p``'s matches; ``None``: the
+    similarity of the matched descriptors (:func:`lburst.matching.similarity`)."""
     import h5py
+
+    from lburst.matching import similarity
 
     files = [f"{n}.png" for n in names]
     with atomic_path(out / "features.h5") as tmp:
@@ -64,12 +71,18 @@ def write_hloc(
         for file, feats, (h, w) in zip(files, features, shapes):
             write_features_h5(tmp, file, feats, (w, h))
     with atomic_path(out / "matches.h5") as tmp, h5py.File(tmp, "w") as f:
-        for (a, b), m in zip(pairs, matches):
+        for p, ((a, b), m) in enumerate(zip(pairs, matches)):
             m0 = np.full(len(features[a]["keypoints"]), -1, np.int32)
             m0[m[:, 0]] = m[:, 1]
+            s0 = np.zeros(len(m0), np.float16)
+            s0[m[:, 0]] = (
+                scores[p]
+                if scores is not None
+                else similarity(features[a]["descriptors"], features[b]["descriptors"], m)
+            )
             group = f.require_group(files[a]).create_group(files[b])
             group.create_dataset("matches0", data=m0)
-            group.create_dataset("matching_scores0", data=(m0 >= 0).astype(np.float16))
+            group.create_dataset("matching_scores0", data=s0)
     with atomic_path(out / "pairs.txt") as tmp:
         tmp.write_text("".join(f"{files[a]} {files[b]}\n" for a, b in pairs))
 
@@ -150,6 +163,8 @@ def write_report(result: "ReconstructionResult", times: dict[str, float], path: 
         "",
         f"Method `{result.method}`; {len(result.registered)}/{len(result.names)} keyframes registered.",
     ]
+    if m.get("camera"):
+        lines.append(f"Camera: {m['camera']}.")
     if "ate_rmse" in m:
         lines.append(
             f"ATE {m['ate_rmse']:.4f} m RMSE ({m.get('ate_percent', float('nan')):.3f} % of the path) "
@@ -189,10 +204,12 @@ def write_recording_outputs(
     shapes: list[tuple[int, int]],
     pairs: list[tuple[int, int]],
     matches: list[np.ndarray],
+    scores: list[np.ndarray] | None = None,
 ) -> None:
-    """``trajectory.tum``, hloc's files and the report of a recording's reconstruction (module docstring)."""
+    """``trajectory.tum``, hloc's files and the report of a recording's reconstruction (module
+    docstring); ``scores``: those of the matches, as :func:`write_hloc` takes them."""
     out = Path(result.out_dir)
     times = keyframe_times(out)
     write_trajectory(result, times, out / "trajectory.tum")
-    write_hloc(out, result.names, features, shapes, pairs, matches)
+    write_hloc(out, result.names, features, shapes, pairs, matches, scores)
     write_report(result, times, out / "report.md")

@@ -7,14 +7,22 @@ or sequential with an overlap for trajectories; a recording's keyframes, which a
 in time, always sequential plus retrieval loop candidates, see :func:`pair_plan`),
 mutual-nearest-neighbour matching, then
 COLMAP in a child process (:mod:`lburst.sfm.colmap`): database, geometric verification,
-mapping; the largest model is written to ``OUT/colmap/model`` (binary) and
+mapping; with ``progress`` a line on stderr tells each stage's seconds as it ends (matching,
+then COLMAP's, :func:`lburst.sfm.colmap.run_job_subprocess`, with a line every
+:data:`lburst.sfm.colmap.HEARTBEAT_SECONDS` while one runs long); the largest model is
+written to ``OUT/colmap/model`` (binary) and
 ``OUT/colmap/model.ply``, and ``OUT/result.json`` holds the metrics
 (:mod:`lburst.sfm.metrics`), the registered images and their poses.
 
 Cameras: one COLMAP camera per image, as COLMAP does by default (a shared camera whose
 intrinsics drift in bundle adjustment, as they do under forward motion, stops every later
-registration), or with ``single_camera`` one for all images when their priors agree.
-The prior is, by ``camera`` option: ``'auto'`` the focal length from EXIF when a single
+registration), or with ``single_camera`` one for all images when their priors agree; by
+default (``None``) a recording, which one camera shot, has one camera, a scene one per image
+(without a ``meta.json`` camera, one estimated camera put the simulated flight's PNG frames at
+0.201 m ATE, one per keyframe at 1.186 m: docs/recordings.md).
+The prior is, by ``camera`` option: ``'auto'`` the scene's calibration when it has one (a
+recording's ``meta.json`` camera, or ``reference.json`` cameras that are a calibration: see
+:mod:`lburst.sfm.reference`), held fixed, else the focal length from EXIF when a single
 image has one, else COLMAP's default ``SIMPLE_RADIAL`` with ``f = 1.2 * max(W, H)`` and a
 centred principal point; ``'default'`` always the latter; ``'reference'`` the scene's
 ``reference.json`` cameras (refined too unless ``fix_intrinsics``).
@@ -23,7 +31,9 @@ centred principal point; ``'default'`` always the latter; ``'reference'`` the sc
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+import sys
+import time
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -68,7 +78,7 @@ class ReconstructOptions:
         camera, camera_model, single_camera, fix_intrinsics: cameras (module docstring).
         mapper: ``'incremental'`` or ``'global'``.
         num_threads, seed: for COLMAP (repeatable for one thread count).
-        progress: tqdm bars.
+        progress: tqdm bars, and a line on stderr per stage of matching and COLMAP with its seconds.
         extra: further :class:`lburst.sfm.colmap.ColmapOptions` fields, e.g. ``max_num_trials``.
         retrieval: with sequential pairs, also each image's this many most similar images
             farther apart (loop-closure candidates, :mod:`lburst.sfm.retrieval`); ``None``:
@@ -94,7 +104,7 @@ class ReconstructOptions:
     fallback_exhaustive: bool = False
     camera: str = "auto"
     camera_model: str = "SIMPLE_RADIAL"
-    single_camera: bool = False
+    single_camera: bool | None = None
     fix_intrinsics: bool = False
     mapper: str = "incremental"
     num_threads: int = 2
@@ -303,6 +313,12 @@ def check_reference(path: Path) -> dict[str, dict]:
     return cameras
 
 
+def calibrated_reference(scene: Scene) -> bool:
+    """Whether the scene's ``reference.json`` cameras are a calibration (:class:`lburst.sfm.reference.Reference`)."""
+    reference = scene.reference()
+    return reference is not None and reference.is_calibration
+
+
 def scene_cameras(
     scene: Scene, shapes: list[tuple[int, int]], options: ReconstructOptions
 ) -> tuple[list[dict], list[int]]:
@@ -314,7 +330,7 @@ def scene_cameras(
     if options.camera == "reference" and scene.reference_path is None:
         raise ReconstructionError(f"{scene.root}: camera='reference' but the scene has no reference.json")
     ref_cams = None if scene.reference_path is None else check_reference(scene.reference_path)
-    if options.camera != "reference":
+    if options.camera == "default" or (options.camera == "auto" and not calibrated_reference(scene)):
         ref_cams = None
     priors = []
     for item, (h, w) in zip(scene.items, shapes):
@@ -333,14 +349,35 @@ def scene_cameras(
     return priors, list(range(len(priors)))
 
 
+def report_stage(line: str) -> None:
+    """Print a stage line of ``lburst reconstruct`` on stderr, above any tqdm bar."""
+    tqdm.write(line, file=sys.stderr)
+
+
+def match_pairs_with_scores(
+    features: list[Features], pairs: list[tuple[int, int]], progress: bool = True, matcher: str = "mnn"
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Matches (M, 2) of each pair and their scores (M,) (:func:`lburst.matching.match_with_scores`:
+    descriptor similarity in [-1, 1]), by the matcher spec ``matcher``; with ``progress`` a
+    bar, then a line with the seconds it took."""
+    from lburst.matching import create, match_with_scores
+
+    match = create(matcher)
+    start = time.perf_counter()
+    found = [
+        match_with_scores(match, features[a], features[b])
+        for a, b in tqdm(pairs, desc="matching", disable=not progress, leave=False)
+    ]
+    if progress:
+        report_stage(f"matching ({len(pairs)} pairs, {matcher}): {time.perf_counter() - start:.1f} s")
+    return [m for m, _ in found], [s for _, s in found]
+
+
 def match_pairs(
     features: list[Features], pairs: list[tuple[int, int]], progress: bool = True, matcher: str = "mnn"
 ) -> list[np.ndarray]:
     """Matches (M, 2) of each pair, by the matcher spec ``matcher`` (mutual nearest neighbours by default)."""
-    from lburst.matching import create
-
-    match = create(matcher)
-    return [match(features[a], features[b]) for a, b in tqdm(pairs, desc="matching", disable=not progress, leave=False)]
+    return match_pairs_with_scores(features, pairs, progress, matcher)[0]
 
 
 @dataclass(frozen=True)
@@ -409,6 +446,8 @@ def reconstruct_scene(
     from lburst.sfm.metrics import evaluate_against_reference, scene_metrics
 
     opts = ReconstructOptions(**options)
+    if opts.single_camera is None:  # one camera shot a recording; a scene's photos may come from several
+        opts = replace(opts, single_camera=is_recording(scene_dir, opts.recording))
     out = Path(out_dir)
     try:
         check_output_outside(out, [scene_dir])
@@ -418,7 +457,7 @@ def reconstruct_scene(
         raise ReconstructionError(f"{out!s}: the output path is not valid UTF-8, which COLMAP cannot use")
     source_error = None
     try:
-        if is_recording(scene_dir):
+        if is_recording(scene_dir, opts.recording):
             scene, features, shapes, source_error = recording_features(scene_dir, method_spec, out, opts, extractor)
             if source_error and len(scene.items) < 2:  # nothing to reconstruct: say why in result.json too
                 out.mkdir(parents=True, exist_ok=True)
@@ -437,13 +476,13 @@ def reconstruct_scene(
             raise ReconstructionError(
                 f"{scene_dir}: a reconstruction needs at least 2 images, found {len(scene.items)}"
             )
-        if not is_recording(scene_dir):
+        if not is_recording(scene_dir, opts.recording):
             features, shapes = scene_features(scene, method_spec, out, opts.progress, extractor)
         cameras, camera_of_image = scene_cameras(scene, shapes, opts)
     except SceneError as err:
         raise ReconstructionError(str(err)) from err
     n = len(scene.items)
-    plan = pair_plan(n, opts, is_recording(scene_dir))
+    plan = pair_plan(n, opts, is_recording(scene_dir, opts.recording))
     mode = plan.mode
     pairs = make_pairs(n, mode, plan.overlap)
     loop_candidates: set[tuple[int, int]] = set()
@@ -455,9 +494,11 @@ def reconstruct_scene(
         )
         loop_candidates = set(loops) - set(pairs)
         pairs = sorted(set(pairs) | loop_candidates)
-    matches = match_pairs(features, pairs, opts.progress, opts.matcher)
-    # a recording's meta.json camera is its calibration: one camera, held fixed
-    calibrated = scene.camera is not None and opts.camera == "auto"
+    matches, scores = match_pairs_with_scores(features, pairs, opts.progress, opts.matcher)
+    # a recording's meta.json camera, or a reference.json that is a calibration, is the
+    # calibration: one camera, held fixed (refining it from dark frames moved the simulated
+    # flight's ATE from 0.133 to 1.17 m, docs/recordings.md)
+    calibrated = opts.camera == "auto" and (scene.camera is not None or calibrated_reference(scene))
     if calibrated and all(cam == cameras[0] for cam in cameras):
         cameras, camera_of_image = cameras[:1], [0] * n
     fixed = opts.fix_intrinsics or calibrated
@@ -491,7 +532,7 @@ def reconstruct_scene(
                 **{f"m_{p}": m for p, m in enumerate(matches)},
             )
         try:
-            summary = run_job_subprocess(job_dir)
+            summary = run_job_subprocess(job_dir, report=report_stage if opts.progress else None)
             result.error = None
         except ColmapError as err:
             result.error = str(err)
@@ -499,7 +540,8 @@ def reconstruct_scene(
         if attempt or done or not opts.fallback_exhaustive or mode == "exhaustive":
             break
         extra = [p for p in exhaustive_pairs(n) if p not in set(pairs)]
-        pairs, matches = pairs + extra, matches + match_pairs(features, extra, opts.progress, opts.matcher)
+        extra_matches, extra_scores = match_pairs_with_scores(features, extra, opts.progress, opts.matcher)
+        pairs, matches, scores = pairs + extra, matches + extra_matches, scores + extra_scores
     verified = np.load(job_dir / "verified.npz") if (job_dir / "verified.npz").is_file() and not result.error else None
     inlier_counts = [len(verified[k]) for k in verified.files if k.startswith("inl_")] if verified is not None else []
     result.metrics = scene_metrics(
@@ -516,6 +558,16 @@ def reconstruct_scene(
         loop_candidates=len(loop_candidates),
         matcher=opts.matcher,
     )
+    if is_recording(scene_dir, opts.recording):  # where the intrinsics came from (result.json, report.md)
+        result.metrics["camera"] = (
+            "meta.json, held fixed"
+            if calibrated
+            else f"default prior held fixed ({'no meta.json camera' if scene.camera is None else '--camera'})"
+            if fixed
+            else f"estimated, {'one for all keyframes' if opts.single_camera else 'one per keyframe'} (no meta.json camera)"
+            if scene.camera is None
+            else f"estimated (meta.json camera not used: --camera {opts.camera})"
+        )
     if plan.near and not result.error:
         result.metrics.update(
             near=plan.near,
@@ -531,8 +583,8 @@ def reconstruct_scene(
     if scene.reference_path is not None and not result.error:
         result.metrics.update(evaluate_against_reference(result, scene.reference_path))
     result.save()
-    if is_recording(scene_dir):
+    if is_recording(scene_dir, opts.recording):
         from lburst.sfm.outputs import write_recording_outputs
 
-        write_recording_outputs(result, features, shapes, pairs, matches)
+        write_recording_outputs(result, features, shapes, pairs, matches, scores)
     return result

@@ -6,7 +6,12 @@ in trajectory order) and optionally ``reference.json``::
     {"source": "synthetic" | "sift-clean" | ...,
      "camera": {"model": "PINHOLE", "width": W, "height": H, "params": [fx, fy, cx, cy]},
      "images": {"<burst>": {"R": [[...], [...], [...]], "t": [tx, ty, tz]}, ...},
-     "length": trajectory length in world units (or null)}
+     "length": trajectory length in world units (or null),
+     "calibrated": true | false}
+
+``calibrated`` (optional; true by default for ``"synthetic"``, false otherwise) says that the
+cameras are a calibration, not an estimate from these images: ``lburst reconstruct`` then
+uses them as the cameras by default, held fixed, as it does a recording's ``meta.json`` camera.
 
 Conventions are COLMAP's own: ``R`` (3x3) and ``t`` (3,) map world to camera,
 ``x_cam = R @ x_world + t``, the camera looks along +z with x right and y down, and a
@@ -36,12 +41,19 @@ class Reference:
         camera: COLMAP camera dict ``{"model": "PINHOLE", "width", "height", "params"}``.
         poses: burst name -> ``(R (3, 3), t (3,))`` world-to-camera, float64.
         length: trajectory length in world units, or ``None`` if unknown.
+        calibrated: the cameras are a calibration (module docstring); ``None``: by ``source``.
     """
 
     source: str
     camera: dict
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
     length: float | None = None
+    calibrated: bool | None = None
+
+    @property
+    def is_calibration(self) -> bool:
+        """Whether the cameras are a calibration (``calibrated``, else ``source == 'synthetic'``)."""
+        return self.source == "synthetic" if self.calibrated is None else self.calibrated
 
     def centers(self) -> dict[str, np.ndarray]:
         """Camera centre ``C = -R^T t`` (3,) in world coordinates of every image."""
@@ -73,6 +85,7 @@ class Reference:
                 for name, (R, t) in self.poses.items()
             },
             "length": None if self.length is None else float(self.length),
+            **({} if self.calibrated is None else {"calibrated": self.calibrated}),
         }
 
     def save(self, path: str | Path) -> None:
@@ -123,9 +136,13 @@ class Reference:
         length = data.get("length")
         if length is not None and (isinstance(length, bool) or not np.isfinite(float(length)) or float(length) <= 0):
             raise ValueError(f"length must be a positive number of metres, got {length!r}")
+        calibrated = data.get("calibrated")
+        if calibrated is not None and not isinstance(calibrated, bool):
+            raise ValueError(f"calibrated must be true or false, got {calibrated!r}")
         return cls(
             source=str(data["source"]),
             camera=dict(camera),
             poses=poses,
             length=None if length is None else float(length),
+            calibrated=calibrated,
         )

@@ -1,0 +1,50 @@
+"""``--camera auto`` takes a scene's calibration: reference.json cameras that are a calibration
+(synthetic, or marked ``"calibrated": true``) become the cameras, held fixed by default; cameras
+estimated from the images (``sift-clean``) are not used as a prior unless asked."""
+
+import json
+
+import numpy as np
+import pytest
+
+from lburst.io import write_image
+from lburst.sfm.reconstruct import ReconstructOptions, calibrated_reference, scene_cameras
+from lburst.sfm.scene import list_scene
+
+CAMERA = {"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 50.0, 32.0, 24.0]}
+
+
+def make_scene(root, **reference):
+    for name in ("0000", "0001"):
+        (root / name).mkdir()
+        for k in range(3):
+            write_image(root / name / f"frame_{k:03d}.png", np.full((48, 64, 3), 40 * k, np.uint8))
+    poses = {name: {"R": np.eye(3).tolist(), "t": [float(i), 0.0, 0.0]} for i, name in enumerate(("0000", "0001"))}
+    (root / "reference.json").write_text(json.dumps({"camera": CAMERA, "images": poses, "length": 1.0, **reference}))
+    return list_scene(root)
+
+
+@pytest.mark.parametrize(
+    "reference, calibrated",
+    [
+        ({"source": "synthetic"}, True),
+        ({"source": "sift-clean"}, False),
+        ({"source": "sift-clean", "calibrated": True}, True),
+        ({"source": "synthetic", "calibrated": False}, False),
+    ],
+)
+def test_auto_takes_the_reference_cameras_only_when_they_are_a_calibration(tmp_path, reference, calibrated):
+    scene = make_scene(tmp_path, **reference)
+    assert calibrated_reference(scene) is calibrated
+    priors, _ = scene_cameras(scene, [(48, 64)] * 2, ReconstructOptions(camera="auto"))
+    assert (priors[0]["params"] == CAMERA["params"]) is calibrated
+    default, _ = scene_cameras(scene, [(48, 64)] * 2, ReconstructOptions(camera="default"))
+    assert default[0]["params"] != CAMERA["params"]
+
+
+def test_a_calibrated_flag_that_is_not_a_boolean_is_refused_by_file(tmp_path):
+    from lburst.sfm.reference import Reference
+
+    make_scene(tmp_path, source="sift-clean", calibrated="yes")
+    with pytest.raises(ValueError, match="calibrated must be true or false"):
+        Reference.load(tmp_path / "reference.json")
