@@ -19,6 +19,8 @@ _EXPORTS = {
     "CheckpointError": "lburst.model.network",
     "load_checkpoint": "lburst.model.network",
     "save_checkpoint": "lburst.model.network",
+    "LBurstError": "lburst.errors",
+    "LBurstValueError": "lburst.errors",
     "BurstError": "lburst.io",
     "load_burst": "lburst.io",
     "save_burst": "lburst.io",

@@ -26,6 +26,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.frames import check_burst, gray_unit, time_offsets
 
@@ -188,9 +189,9 @@ def estimate_shifts(burst: np.ndarray, method: Method = "phase", motion: Motion 
             constant velocity through them (robotic bursts), which averages the errors.
     """
     if method not in METHODS:
-        raise ValueError(f"unknown alignment method {method!r}: use 'phase', 'ecc' or 'pyramid'")
+        raise LBurstValueError(f"unknown alignment method {method!r}: use 'phase', 'ecc' or 'pyramid'")
     if motion not in ("free", "linear"):
-        raise ValueError(f"unknown motion model {motion!r}: use 'free' or 'linear'")
+        raise LBurstValueError(f"unknown motion model {motion!r}: use 'free' or 'linear'")
     if method == "pyramid":
         shifts = pyramid_shifts(burst)
         return fit_linear(shifts) if motion == "linear" else shifts
@@ -238,7 +239,7 @@ def align_burst(
         shifts = estimate_shifts(burst, method=method, motion=motion)
     shifts = np.asarray(shifts, np.float64)
     if shifts.shape != (n, 2):
-        raise ValueError(f"shifts must be ({n}, 2) for a {n}-frame burst, got {shifts.shape}")
+        raise LBurstValueError(f"shifts must be ({n}, 2) for a {n}-frame burst, got {shifts.shape}")
     out = np.empty(burst.shape, burst.dtype)  # C order: every out[k] is a contiguous frame OpenCV writes into
     for k in range(n):
         if np.any(shifts[k] != 0):

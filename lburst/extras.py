@@ -15,6 +15,8 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
+from lburst.errors import LBurstError
+
 # importable module -> (pip package, extra)
 EXTRAS: dict[str, tuple[str, str]] = {
     "pycolmap": ("pycolmap", "sfm"),
@@ -33,7 +35,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
 }
 
 
-class MissingExtra(ImportError):
+class MissingExtra(LBurstError, ImportError):
     """An optional dependency is not installed; the message says which extra has it."""
 
 

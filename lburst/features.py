@@ -23,6 +23,8 @@ from typing import Protocol
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
+
 Features = dict[str, np.ndarray]
 
 
@@ -67,25 +69,25 @@ def check_features(features: Features) -> Features:
     """Raise ``ValueError`` if ``features`` does not have the shape documented above."""
     missing = [k for k in REQUIRED if k not in features]
     if missing:
-        raise ValueError(f"features lack {missing}")
+        raise LBurstValueError(f"features lack {missing}")
     k = len(features["keypoints"])
     if features["keypoints"].shape != (k, 2):
-        raise ValueError(f"keypoints must be (K, 2), got {features['keypoints'].shape}")
+        raise LBurstValueError(f"keypoints must be (K, 2), got {features['keypoints'].shape}")
     for key in ("scales", "scores", "orientations"):
         if key in features and features[key].shape != (k,):
-            raise ValueError(f"{key} must be ({k},), got {features[key].shape}")
+            raise LBurstValueError(f"{key} must be ({k},), got {features[key].shape}")
     d = features["descriptors"]
     if d.ndim != 2 or len(d) != k:
-        raise ValueError(f"descriptors must be (K, D) with K={k}, got {d.shape}")
+        raise LBurstValueError(f"descriptors must be (K, D) with K={k}, got {d.shape}")
     if d.dtype not in (np.float32, np.uint8):
-        raise ValueError(f"descriptors must be float32 or uint8, got {d.dtype}")
+        raise LBurstValueError(f"descriptors must be float32 or uint8, got {d.dtype}")
     if not np.isfinite(features["keypoints"]).all() or (d.dtype == np.float32 and not np.isfinite(d).all()):
-        raise ValueError("keypoints and descriptors must be finite (no NaN or inf)")
+        raise LBurstValueError("keypoints and descriptors must be finite (no NaN or inf)")
     size = features.get("image_size")
     if size is not None and (np.shape(size) != (2,) or not np.issubdtype(np.asarray(size).dtype, np.integer)):
-        raise ValueError(f"image_size must be (2,) integers (width, height), got {np.asarray(size).tolist()}")
+        raise LBurstValueError(f"image_size must be (2,) integers (width, height), got {np.asarray(size).tolist()}")
     if size is not None and min(size) < 1:
-        raise ValueError(f"image_size must be positive (width, height), got {tuple(int(v) for v in size)}")
+        raise LBurstValueError(f"image_size must be positive (width, height), got {tuple(int(v) for v in size)}")
     return features
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.io import to_uint8
 
 #: pixels: the smallest side of a burst that lburst aligns, merges or extracts features from
@@ -22,15 +23,15 @@ def check_burst(burst: np.ndarray) -> np.ndarray:
     :data:`MIN_BURST_SIDE` pixels a side, and its dtype."""
     burst = np.asarray(burst)
     if burst.ndim != 4 or burst.shape[-1] != 3:
-        raise ValueError(f"expected a burst (N, H, W, 3), got shape {burst.shape}")
+        raise LBurstValueError(f"expected a burst (N, H, W, 3), got shape {burst.shape}")
     if burst.shape[0] % 2 != 1:
-        raise ValueError(f"a burst needs an odd number of frames, got {burst.shape[0]}")
+        raise LBurstValueError(f"a burst needs an odd number of frames, got {burst.shape[0]}")
     if min(burst.shape[1:3]) < MIN_BURST_SIDE:
-        raise ValueError(
+        raise LBurstValueError(
             f"a {burst.shape[2]}x{burst.shape[1]} burst is too small (at least {MIN_BURST_SIDE} px a side)"
         )
     if burst.dtype not in (np.uint8, np.uint16):
-        raise ValueError(f"a burst must be uint8 or uint16, got {burst.dtype}")
+        raise LBurstValueError(f"a burst must be uint8 or uint16, got {burst.dtype}")
     return burst
 
 
@@ -59,6 +60,6 @@ def gray_unit(burst: np.ndarray) -> np.ndarray:
 def to_gray8(image: np.ndarray) -> np.ndarray:
     """One RGB image ``(H, W, 3)`` uint8 or uint16 as 8-bit grayscale ``(H, W)`` (uint16 scaled by 255/65535)."""
     if image.dtype not in (np.uint8, np.uint16) or image.ndim != 3 or image.shape[-1] != 3:
-        raise ValueError(f"expected an RGB image (H, W, 3) uint8 or uint16, got {image.shape} {image.dtype}")
+        raise LBurstValueError(f"expected an RGB image (H, W, 3) uint8 or uint16, got {image.shape} {image.dtype}")
     luma = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
     return to_uint8(luma)

@@ -13,6 +13,8 @@ from typing import Iterator, Sequence
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstOSError, LBurstValueError
+
 
 def file_sha1(path: str | Path) -> str:
     """Hex SHA-1 of a file's bytes."""
@@ -104,7 +106,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
-class BurstError(ValueError):
+class BurstError(LBurstValueError):
     """A burst that cannot be read; the message names the file and the problem."""
 
 
@@ -120,7 +122,7 @@ def check_output_outside(out: str | Path, inputs: Sequence[str | Path]) -> None:
     for source in inputs:
         folder = Path(os.path.abspath(source))
         if folder.is_dir() and (target == folder or folder in target.parents):
-            raise ValueError(
+            raise LBurstValueError(
                 f"{out}: the output folder is {'' if target == folder else 'inside '}the input {source}; choose one outside it"
             )
 
@@ -175,7 +177,7 @@ def write_image(path: str | Path, rgb: np.ndarray) -> None:
     image = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR) if rgb.ndim == 3 else rgb
     ok, data = cv2.imencode(path.suffix or ".png", image)
     if not ok:
-        raise OSError(f"{path}: could not encode a {rgb.dtype} {rgb.shape} image as {path.suffix or '.png'}")
+        raise LBurstOSError(f"{path}: could not encode a {rgb.dtype} {rgb.shape} image as {path.suffix or '.png'}")
     data.tofile(path)
 
 
@@ -329,9 +331,9 @@ def features_image_size(features: dict[str, np.ndarray], image_size: tuple[int, 
     own = features.get("image_size")
     own = None if own is None else (int(own[0]), int(own[1]))
     if image_size is None and own is None:
-        raise ValueError("the image size (W, H) is needed: the features have no image_size")
+        raise LBurstValueError("the image size (W, H) is needed: the features have no image_size")
     if image_size is not None and own is not None and tuple(int(v) for v in image_size) != own:
-        raise ValueError(f"image size {tuple(image_size)} differs from the features' image_size {own}")
+        raise LBurstValueError(f"image size {tuple(image_size)} differs from the features' image_size {own}")
     return own if image_size is None else (int(image_size[0]), int(image_size[1]))
 
 

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstValueError
+
 MIN_CORRELATION = 0.5
 """A registration counts when the warped thumbnails correlate at least this much: 0.8-1.0
 between views of the moonless flight up to 32 frames apart, at most 0.15 between two
@@ -51,7 +53,7 @@ def register(reference: np.ndarray, view: np.ndarray, start: np.ndarray | None =
     from ``start``, else from the translation phase correlation finds), or ``None`` if it does not
     converge or the two correlate less than :data:`MIN_CORRELATION` under it."""
     if reference.shape != view.shape:
-        raise ValueError(f"thumbnails of different shapes: {reference.shape} and {view.shape}")
+        raise LBurstValueError(f"thumbnails of different shapes: {reference.shape} and {view.shape}")
     a, b = _standard(reference), _standard(view)
     if start is None:
         (dx, dy), _ = cv2.phaseCorrelate(a, b, cv2.createHanningWindow(a.shape[::-1], cv2.CV_32F))
@@ -97,9 +99,9 @@ class MotionGate:
 
     def __post_init__(self) -> None:
         if not 0 < self.threshold < 0.5:
-            raise ValueError(f"--motion must be in (0, 0.5) of the image width, got {self.threshold}")
+            raise LBurstValueError(f"--motion must be in (0, 0.5) of the image width, got {self.threshold}")
         if self.size < 16:
-            raise ValueError(f"thumbnail size must be at least 16 pixels, got {self.size}")
+            raise LBurstValueError(f"thumbnail size must be at least 16 pixels, got {self.size}")
 
 
 class MotionTracker:

@@ -6,22 +6,26 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from lburst.errors import LBurstValueError
+
 
 def check_descriptors(desc_a: np.ndarray, desc_b: np.ndarray) -> None:
     """``ValueError`` unless both are (K, D) arrays of one dtype and one width D, and float
     descriptors are finite (a NaN descriptor would match whatever comes first)."""
     for name, d in (("first", desc_a), ("second", desc_b)):
         if not isinstance(d, np.ndarray) or d.ndim != 2:
-            raise ValueError(f"{name} descriptors must be a (K, D) array, got {getattr(d, 'shape', type(d).__name__)}")
+            raise LBurstValueError(
+                f"{name} descriptors must be a (K, D) array, got {getattr(d, 'shape', type(d).__name__)}"
+            )
     if desc_a.dtype != desc_b.dtype:
-        raise ValueError(f"descriptor types differ: {desc_a.dtype} vs {desc_b.dtype}")
+        raise LBurstValueError(f"descriptor types differ: {desc_a.dtype} vs {desc_b.dtype}")
     if desc_a.shape[1] != desc_b.shape[1]:
-        raise ValueError(f"descriptor sizes differ: {desc_a.shape[1]} vs {desc_b.shape[1]}")
+        raise LBurstValueError(f"descriptor sizes differ: {desc_a.shape[1]} vs {desc_b.shape[1]}")
     if np.issubdtype(desc_a.dtype, np.floating):
         for name, d in (("first", desc_a), ("second", desc_b)):
             bad = int((~np.isfinite(d)).any(1).sum())
             if bad:
-                raise ValueError(f"{bad} of the {name} set's {len(d)} descriptors hold NaN or inf")
+                raise LBurstValueError(f"{bad} of the {name} set's {len(d)} descriptors hold NaN or inf")
 
 
 def _distances(a: torch.Tensor, b: torch.Tensor, binary: bool) -> torch.Tensor:

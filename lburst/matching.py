@@ -44,8 +44,9 @@ from typing import TYPE_CHECKING, Callable, Protocol
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.features import Features
-from lburst.methods.options import describe_options, parse_options
+from lburst.methods.options import describe_options, parse_options, parse_pairs
 
 if TYPE_CHECKING:
     import torch
@@ -135,24 +136,16 @@ def available() -> list[MatcherInfo]:
 def create(spec: str = DEFAULT) -> Matcher:
     """The matcher of ``spec`` (``NAME[,KEY=VALUE...]``)."""
     if not isinstance(spec, str):
-        raise ValueError(f"a matcher spec is a string such as 'mnn' or 'ratio,ratio=0.8', got {spec!r}")
+        raise LBurstValueError(f"a matcher spec is a string such as 'mnn' or 'ratio,ratio=0.8', got {spec!r}")
     name, *pairs = spec.split(",")
     name = name.strip()
     if name not in _MATCHERS:
-        raise ValueError(
+        raise LBurstValueError(
             f"unknown matcher {name!r}; available: "
             + "; ".join(f"{m.name} ({describe_options(m.options)})" for m in available())
         )
-    given = {}
-    for pair in pairs:
-        key, eq, value = pair.partition("=")
-        if not eq or not key.strip():
-            raise ValueError(f"bad option {pair!r} in matcher spec {spec!r}: expected KEY=VALUE")
-        if key.strip() in given:
-            raise ValueError(f"option {key.strip()!r} given twice in matcher spec {spec!r}")
-        given[key.strip()] = value.strip()
     info = _MATCHERS[name]
-    matcher = info.factory(parse_options(info.options, given, name, kind="matcher"))
+    matcher = info.factory(parse_options(info.options, parse_pairs(pairs, spec, "matcher"), name, kind="matcher"))
     matcher.name = spec
     return matcher
 
@@ -199,7 +192,7 @@ def _tensors(a: np.ndarray, b: np.ndarray, device: str):
     import torch
 
     if a.dtype != b.dtype:
-        raise ValueError(f"descriptor types differ: {a.dtype} vs {b.dtype}")
+        raise LBurstValueError(f"descriptor types differ: {a.dtype} vs {b.dtype}")
     return (torch.from_numpy(np.ascontiguousarray(a)).to(device), torch.from_numpy(np.ascontiguousarray(b)).to(device))
 
 
@@ -240,7 +233,7 @@ class RatioOptions:
 
     def __post_init__(self) -> None:
         if not 0 < self.ratio <= 1:
-            raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
+            raise LBurstValueError(f"ratio must be in (0, 1], got {self.ratio}")
 
 
 class RatioTest(DescriptorMatcher):
@@ -290,7 +283,7 @@ class SMNNOptions:
 
     def __post_init__(self) -> None:
         if not 0 < self.ratio <= 1:
-            raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
+            raise LBurstValueError(f"ratio must be in (0, 1], got {self.ratio}")
 
 
 def _nearest_two(dist: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

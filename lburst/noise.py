@@ -17,6 +17,8 @@ from typing import Callable, Protocol
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
+
 #: The network's input normalisation (RGB on 0..1): ImageNet's mean and std.  Kept here,
 #: free of torch, because ``gaussian-var:V`` noise is a variance in that normalised space.
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
@@ -53,7 +55,7 @@ class GaussianNoise:
         """The paper's noise: variance ``variance`` on ImageNet-normalised values
         ``(x / 255 - mean) / std_c``, i.e. std ``sqrt(variance) * std_c * 255`` per channel."""
         if variance < 0:
-            raise ValueError(f"noise variance must be >= 0, got {variance}")
+            raise LBurstValueError(f"noise variance must be >= 0, got {variance}")
         return cls(tuple(float(np.sqrt(variance) * s * 255.0) for s in IMAGENET_STD))
 
     @property
@@ -112,13 +114,13 @@ class LowLightNoise:
 
     def __post_init__(self) -> None:
         if self.photons <= 0 or self.quantum_efficiency <= 0:
-            raise ValueError("photons and quantum_efficiency must be positive")
+            raise LBurstValueError("photons and quantum_efficiency must be positive")
 
     @classmethod
     def preset(cls, name: str) -> "LowLightNoise":
         """``dusk`` (200 photons at white), ``night`` (20) or ``moonless`` (5)."""
         if name not in cls.PRESETS:
-            raise ValueError(f"unknown low-light preset {name!r}; presets: {', '.join(cls.PRESETS)}")
+            raise LBurstValueError(f"unknown low-light preset {name!r}; presets: {', '.join(cls.PRESETS)}")
         return cls(photons=cls.PRESETS[name])
 
     @property
@@ -382,21 +384,21 @@ class SensorNoise:
         bias = (float(bias),) * 4 if np.ndim(bias) == 0 else tuple(float(b) for b in bias)
         object.__setattr__(self, "black_bias", bias)
         if len(bias) != 4 or not all(math.isfinite(b) for b in bias):
-            raise ValueError(f"black_bias must be one finite value or four (R, G1, G2, B), got {self.black_bias}")
+            raise LBurstValueError(f"black_bias must be one finite value or four (R, G1, G2, B), got {self.black_bias}")
         if not (math.isfinite(self.photons) and self.photons > 0):
-            raise ValueError(f"photons must be a positive number, got {self.photons}")
+            raise LBurstValueError(f"photons must be a positive number, got {self.photons}")
         if not 0 < self.quantum_efficiency <= 1 or not (math.isfinite(self.gain) and self.gain > 0):
-            raise ValueError("need 0 < quantum_efficiency <= 1 and a positive gain")
+            raise LBurstValueError("need 0 < quantum_efficiency <= 1 and a positive gain")
         if self.read not in READ_LAWS:
-            raise ValueError(f"read noise must be one of {', '.join(READ_LAWS)}, got {self.read!r}")
+            raise LBurstValueError(f"read noise must be one of {', '.join(READ_LAWS)}, got {self.read!r}")
         for name in ("read_std", "tl_scale", "row_std", "bias_std"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+                raise LBurstValueError(f"{name} must be a finite number >= 0, got {value}")
         if not self.tl_shape > -0.5:
-            raise ValueError(f"the Tukey-lambda shape must be > -0.5 (finite variance), got {self.tl_shape}")
+            raise LBurstValueError(f"the Tukey-lambda shape must be > -0.5 (finite variance), got {self.tl_shape}")
         if not 1 <= self.adc_bits <= 16 or not 0 <= self.black_level < 2**self.adc_bits - 1:
-            raise ValueError("need 1 <= adc_bits <= 16 and 0 <= black_level < 2**adc_bits - 1")
+            raise LBurstValueError("need 1 <= adc_bits <= 16 and 0 <= black_level < 2**adc_bits - 1")
 
     @classmethod
     def preset(
@@ -406,10 +408,10 @@ class SensorNoise:
         photons at white; ``read`` (``'tl'`` or ``'gauss'``) defaults to the sensor's."""
         name = sensor.lower()
         if name not in SENSORS:
-            raise ValueError(f"unknown sensor {sensor!r}; sensors: {', '.join(SENSORS)}")
+            raise LBurstValueError(f"unknown sensor {sensor!r}; sensors: {', '.join(SENSORS)}")
         preset = SENSORS[name]
         if iso not in preset.isos:
-            raise ValueError(f"{name} has no calibration at ISO {iso}; ISOs: {', '.join(map(str, preset.isos))}")
+            raise LBurstValueError(f"{name} has no calibration at ISO {iso}; ISOs: {', '.join(map(str, preset.isos))}")
         figures = preset.isos[iso]
         return cls(
             gain=figures.gain,
@@ -473,7 +475,9 @@ class SensorNoise:
         channel).  Leading axes are frames: each gets its own black bias draw."""
         image = np.asarray(image, np.float32)
         if image.ndim < (2 if bayer else 3):
-            raise ValueError(f"need a {'(..., H, W) mosaic' if bayer else '(..., H, W, C) image'}, got {image.shape}")
+            raise LBurstValueError(
+                f"need a {'(..., H, W) mosaic' if bayer else '(..., H, W, C) image'}, got {image.shape}"
+            )
         linear = image / np.float32(255.0)
         if self.gamma != 1.0:
             linear = np.clip(linear, 0, 1) ** self.gamma
@@ -521,13 +525,13 @@ def sensor_from_spec(arg: str) -> SensorNoise:
     head, *options = arg.split(",")
     name, at, iso = head.partition("@")
     if not at or not name or not iso.strip().isdigit():
-        raise ValueError(f"a sensor is NAME@ISO (sensors: {', '.join(SENSORS)}), got {head!r}")
+        raise LBurstValueError(f"a sensor is NAME@ISO (sensors: {', '.join(SENSORS)}), got {head!r}")
     kwargs: dict = {}
     for option in options:
         key, eq, value = option.partition("=")
         key, value = key.strip(), value.strip()
         if not eq or key not in ("photons", "read") or key in kwargs:
-            raise ValueError(f"bad option {option!r}: use photons=P and read=tl|gauss, each at most once")
+            raise LBurstValueError(f"bad option {option!r}: use photons=P and read=tl|gauss, each at most once")
         if key == "photons":
             value = LowLightNoise.PRESETS.get(value) or float(value)
         kwargs[key] = value
@@ -556,11 +560,11 @@ def noise_from_spec(spec: str) -> NoiseModel:
     if name == "none" and not arg:
         return NoNoise()
     if name not in parsers or not arg:
-        raise ValueError(
+        raise LBurstValueError(
             f"bad noise spec {spec!r}: use none, gaussian:STD, gaussian-var:V, lowlight:PHOTONS, "
             f"lowlight:{{{','.join(LowLightNoise.PRESETS)}}} or sensor:{{{','.join(SENSORS)}}}@ISO[,photons=P]"
         )
     try:
         return parsers[name](arg)
     except ValueError as exc:
-        raise ValueError(f"bad noise spec {spec!r}: {exc}") from exc
+        raise LBurstValueError(f"bad noise spec {spec!r}: {exc}") from exc

@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
+
 
 def bounds_text(low, high, low_open: bool = False) -> str:
     """``'>= 1 and <= 10'``: the bounds as the errors say them."""
@@ -27,12 +29,12 @@ def check_integer(value, name: str, low: int | None = None, high: int | None = N
     """``value`` as an int if it is an integer (not a bool, not a float) within ``[low, high]``;
     else ``ValueError`` naming ``name``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(
+        raise LBurstValueError(
             f"{name} must be an integer{' ' + bounds_text(low, high) if bounds_text(low, high) else ''}, got {value!r}"
         )
     value = int(value)
     if (low is not None and value < low) or (high is not None and value > high):
-        raise ValueError(f"{name} must be an integer {bounds_text(low, high)}, got {value}")
+        raise LBurstValueError(f"{name} must be an integer {bounds_text(low, high)}, got {value}")
     return value
 
 
@@ -40,12 +42,12 @@ def check_real(value, name: str, low: float | None = None, high: float | None = 
     """``value`` as a float if it is a finite number within its bounds (``low_open``: above
     ``low``, not equal); else ``ValueError`` naming ``name``."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} must be a number, got {value!r}")
+        raise LBurstValueError(f"{name} must be a number, got {value!r}")
     value = float(value)
     bounds = bounds_text(low, high, low_open)
     if not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number{' ' + bounds if bounds else ''}, got {value}")
+        raise LBurstValueError(f"{name} must be a finite number{' ' + bounds if bounds else ''}, got {value}")
     too_low = low is not None and (value <= low if low_open else value < low)
     if too_low or (high is not None and value > high):
-        raise ValueError(f"{name} must be a number {bounds}, got {value:g}")
+        raise LBurstValueError(f"{name} must be a number {bounds}, got {value:g}")
     return value

@@ -9,8 +9,10 @@ import os
 from pathlib import Path
 from typing import Iterator
 
+from lburst.errors import LBurstOSError
 
-class FolderInUse(OSError):
+
+class FolderInUse(LBurstOSError):
     """Another process holds the lock on an output folder (:func:`folder_lock`)."""
 
 

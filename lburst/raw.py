@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.io import BurstError
 from lburst.numbers import check_real
@@ -133,15 +134,15 @@ class Normalisation:
             try:
                 object.__setattr__(self, "gain", float(self.gain))
             except ValueError:
-                raise ValueError(f"gain must be 'auto', 'none' or a number, got {self.gain!r}") from None
+                raise LBurstValueError(f"gain must be 'auto', 'none' or a number, got {self.gain!r}") from None
         if not isinstance(self.gain, str):
             check_real(self.gain, "raw gain", 0, low_open=True)
         if self.curve not in ("srgb", "linear"):
-            raise ValueError(f"curve must be 'srgb' or 'linear', got {self.curve!r}")
+            raise LBurstValueError(f"curve must be 'srgb' or 'linear', got {self.curve!r}")
         if not 0 < self.percentile <= 100 or not 0 < self.target <= 1 or self.max_gain < 1:
-            raise ValueError("need 0 < percentile <= 100, 0 < target <= 1 and max_gain >= 1")
+            raise LBurstValueError("need 0 < percentile <= 100, 0 < target <= 1 and max_gain >= 1")
         if not isinstance(self.binning, int) or self.binning < 1:
-            raise ValueError(f"binning must be a positive integer, got {self.binning!r}")
+            raise LBurstValueError(f"binning must be a positive integer, got {self.binning!r}")
 
     def estimate_gain(self, frames: np.ndarray) -> float | None:
         """The recording's gain from a burst of linear uint16 frames ``(N, H, W, 3)`` (or one frame

@@ -13,6 +13,8 @@ import math
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstValueError
+
 
 def _cos_sin(deg: float) -> tuple[float, float]:
     if float(deg) % 90 == 0:  # exact, so that quarter turns map pixel centres onto pixel centres
@@ -26,7 +28,7 @@ def rotation_map(deg: float, shape: tuple[int, ...]) -> tuple[np.ndarray, tuple[
     """The 3x3 map from pixels of an image of ``shape`` (H, W, ...) to pixels of the image
     turned by ``deg``, and the turned image's (H, W)."""
     if not math.isfinite(deg):
-        raise ValueError(f"rotation must be a finite number of degrees, got {deg!r}")
+        raise LBurstValueError(f"rotation must be a finite number of degrees, got {deg!r}")
     h, w = shape[:2]
     c, s = _cos_sin(deg)
     new_w = int(round(abs(w * c) + abs(h * s)))

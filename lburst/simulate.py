@@ -19,6 +19,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.motion import BurstMotion
 from lburst.noise import NoiseModel
 
@@ -45,7 +46,7 @@ def random_motion(rng: np.random.Generator | int | None, max_shift: float) -> tu
 def translate(image: np.ndarray, dx: float, dy: float, border: str = "reflect") -> np.ndarray:
     """``image`` (H, W[, C]) translated by (dx, dy), bilinear, as float32."""
     if border not in _BORDERS:
-        raise ValueError(f"unknown border {border!r}: use {', '.join(_BORDERS)}")
+        raise LBurstValueError(f"unknown border {border!r}: use {', '.join(_BORDERS)}")
     h, w = image.shape[:2]
     matrix = np.array([[1, 0, dx], [0, 1, dy]], np.float64)
     out = cv2.warpAffine(image.astype(np.float32), matrix, (w, h), flags=cv2.INTER_LINEAR, borderMode=_BORDERS[border])
@@ -68,13 +69,13 @@ def simulate_burst(
     """
     image = np.asarray(image)
     if image.dtype not in (np.uint8, np.uint16):
-        raise ValueError(f"image must be uint8 or uint16, got {image.dtype}")
+        raise LBurstValueError(f"image must be uint8 or uint16, got {image.dtype}")
     if image.ndim == 2:
         image = np.repeat(image[..., None], 3, axis=2)
     if image.ndim != 3 or image.shape[2] != 3:
-        raise ValueError(f"image must be (H, W) or (H, W, 3), got shape {image.shape}")
+        raise LBurstValueError(f"image must be (H, W) or (H, W, 3), got shape {image.shape}")
     if frames < 1 or frames % 2 == 0:
-        raise ValueError(f"frames must be odd and positive, got {frames}")
+        raise LBurstValueError(f"frames must be odd and positive, got {frames}")
     half = frames // 2
     if isinstance(motion, BurstMotion):
         if motion.is_translation:
@@ -85,7 +86,7 @@ def simulate_burst(
     if offsets.shape == (2,):
         offsets = np.arange(-half, half + 1)[:, None] * offsets[None]
     if offsets.shape != (frames, 2):
-        raise ValueError(f"motion must be (dx, dy) or {frames} (dx, dy) pairs, got shape {offsets.shape}")
+        raise LBurstValueError(f"motion must be (dx, dy) or {frames} (dx, dy) pairs, got shape {offsets.shape}")
     generator = as_generator(rng)
     top = float(np.iinfo(image.dtype).max)
     burst = np.empty((frames,) + image.shape, image.dtype)
@@ -108,7 +109,7 @@ def _simulate_general(
     """:func:`simulate_burst` for a motion beyond a translation: frame k is one remap of
     ``image`` at ``motion.source_points(k)``."""
     if border not in _BORDERS:
-        raise ValueError(f"unknown border {border!r}: use {', '.join(_BORDERS)}")
+        raise LBurstValueError(f"unknown border {border!r}: use {', '.join(_BORDERS)}")
     h, w = image.shape[:2]
     top = float(np.iinfo(image.dtype).max)
     source = image.astype(np.float32)

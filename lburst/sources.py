@@ -49,6 +49,7 @@ from typing import Iterator
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_key, read_image
 from lburst.keyframes import MotionGate, MotionTracker, thumbnail
@@ -87,7 +88,9 @@ class RecordingOptions:
     def __post_init__(self) -> None:
         check_integer(self.burst, "--burst", 1, 99)
         if self.burst % 2 == 0:
-            raise ValueError(f"--burst must be odd and positive (the middle frame is the keyframe), got {self.burst}")
+            raise LBurstValueError(
+                f"--burst must be odd and positive (the middle frame is the keyframe), got {self.burst}"
+            )
         check_integer(self.every, "--every", 1)
         check_integer(self.start, "--start", 0)
         if self.fps is not None:

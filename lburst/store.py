@@ -2,14 +2,24 @@
 
 Used by ``lburst extract``, ``lburst reconstruct`` (and so by the reconstruction
 benchmark) and the homography benchmark.  Each file has the layout of :func:`lburst.io.write_features_npz` plus
-``_meta``, a JSON object whose ``key`` says what the features depend on:
+``_meta``, a JSON object whose ``key`` says what the features depend on.  Every caller
+gets its key from :func:`key`, the one key builder, so that the same burst by the same
+method has the same key wherever it was computed (``lburst extract`` of a recording and
+``lburst reconstruct`` of it share the features of its keyframes):
 
-- ``method``: the method spec and the SHA-1 of the weights it loads
+- ``method`` (:func:`method_key`): the method spec and the SHA-1 of the weights it loads
   (:func:`lburst.methods.learned.results_key`), so retrained weights are not served
-  old features, plus the options given besides the spec (``top_k``, ``precision``);
-- ``source``: the burst's absolute path and the SHA-1 of its content
-  (:func:`content_sha1`; a recording's keyframe, or a benchmark's generated burst, gives
-  the SHA-1 of what it was made from), so changed frames are computed again.
+  old features, plus the options given besides the spec (``top_k``, ``precision``), an
+  option left out when it has the method's default value (``--top-k 4000`` is the
+  default of a learned method, so ``extract`` and ``reconstruct`` key it alike);
+- ``source``: the burst's absolute ``path`` and ``sha1``, the SHA-1 of its content
+  (:func:`content_sha1`), so changed frames are computed again; for a recording's keyframe,
+  the recording's path, ``sha1`` its content and cut (:func:`recording_content`) and
+  ``keyframe`` the keyframe's name; a benchmark's generated burst gives the SHA-1 of what it
+  was made from.
+
+Image sizes are (W, H) at the store's edge, in and out, as a features dict's
+``image_size`` (and LightGlue's ``image_size``) has them.
 
 Stored features are used only when the stored key equals the wanted one
 (:func:`load`).  :func:`same_source` tells a stale file of the same burst (to replace)
@@ -54,20 +64,62 @@ def content_sha1(path: str | Path) -> str:
     return files_sha1(files)
 
 
+def recording_content(recording: Any) -> str:
+    """What the features of a recording's keyframes depend on besides the method: the SHA-1 of
+    its whole content (a video's bytes, or every frame file's name and bytes, :func:`files_sha1`)
+    and how it is cut into keyframe bursts (:meth:`lburst.sources.RecordingOptions.signature`).
+
+    Every byte counts, so a change anywhere (frames re-encoded in the middle of a video, a
+    frame file rewritten at the same size) computes the keyframes again.  Sampling the
+    file (its size and first and last MiB) missed such changes and served stale features;
+    trusting ``(size, mtime_ns)`` misses them too where a copy keeps the times (``cp -p``,
+    ``rsync -a``, ``tar``) or a clock goes back.  Reading costs about a second per GB from a
+    warm disk, once per run, far less than decoding the recording.
+    """
+    sha1 = files_sha1([recording.path] if recording.is_video else recording.files)
+    return f"{sha1}|{recording.options.signature()}"
+
+
+def _default_options(spec: str) -> dict[str, str]:
+    """The options of the method that ``spec`` runs on the burst with their default values
+    (as strings), less those the spec sets itself."""
+    from dataclasses import MISSING, fields
+
+    from lburst.methods import methods, parse_spec
+
+    inner = parse_spec(spec)
+    while inner.inner is not None:
+        inner = inner.inner
+    info = {m.name: m for m in methods()}.get(inner.name)
+    if info is None or info.options is None:
+        return {}
+    return {
+        f.name: str(f.default) for f in fields(info.options) if f.default is not MISSING and f.name not in inner.options
+    }
+
+
 def method_key(spec: str, **options: Any) -> dict[str, Any]:
-    """The ``method`` part of a key: the spec with its weights' SHA-1, and the other options."""
+    """The ``method`` part of a key: the spec with its weights' SHA-1, and the options given
+    besides it, less those that are ``None`` or the method's default."""
     from lburst.methods.learned import results_key
 
-    return {"spec": results_key(spec), "options": {k: str(v) for k, v in sorted(options.items())}}
+    defaults = _default_options(spec)
+    given = {k: str(v) for k, v in sorted(options.items()) if v is not None and defaults.get(k) != str(v)}
+    return {"spec": results_key(spec), "options": given}
 
 
-def burst_key(method: dict[str, Any], source: str | Path, content: str | None = None) -> dict[str, Any]:
-    """The key of one burst's features: ``method`` (:func:`method_key`) on ``source``."""
-    source = Path(source)
-    return {
-        "method": method,
-        "source": {"path": os.fsdecode(os.path.abspath(source)), "sha1": content or content_sha1(source)},
-    }
+def key(
+    method: dict[str, Any], source: str | Path, content: str | None = None, keyframe: str | None = None
+) -> dict[str, Any]:
+    """The key of one burst's features, the only one the store knows (module docstring):
+    ``method`` (:func:`method_key`) on the burst at ``source``, whose content has the SHA-1
+    ``content`` (``None``: :func:`content_sha1` of ``source``); for a recording's keyframe,
+    ``source`` is the recording, ``content`` its :func:`recording_content` and ``keyframe``
+    the keyframe's name."""
+    where = {"path": os.fsdecode(os.path.abspath(source)), "sha1": content or content_sha1(source)}
+    if keyframe is not None:
+        where["keyframe"] = keyframe
+    return {"method": method, "source": where}
 
 
 def _canonical(value: Any) -> str:
@@ -96,6 +148,17 @@ def load(path: str | Path, key: Any) -> tuple[Features, tuple[int, int], dict[st
         return check_features(features), size, meta
     except (OSError, ValueError, KeyError, EOFError):
         return None
+
+
+def find(paths: list[Path], key: Any) -> tuple[Features, tuple[int, int], dict[str, Any]] | None:
+    """What :func:`load` gives for the first of ``paths`` that holds features under ``key``, or
+    ``None``: the same features wherever they were stored (``lburst reconstruct`` finds those
+    of ``lburst extract``)."""
+    for path in paths:
+        found = load(path, key)
+        if found is not None:
+            return found
+    return None
 
 
 def save(path: str | Path, features: Features, image_size: tuple[int, int] | None, key: Any, **info: Any) -> Path:

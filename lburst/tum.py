@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lburst.errors import LBurstValueError
 from lburst.io import atomic_path
 
 Pose = tuple[np.ndarray, np.ndarray]  # world-to-camera (R (3, 3), t (3,))
@@ -36,7 +37,7 @@ def from_tum_row(row: np.ndarray) -> Pose:
 def write_tum(path: str | Path, times: list[float] | np.ndarray, poses: list[Pose], header: str | None = None) -> Path:
     """Write poses (world-to-camera) at ``times`` (seconds) as a TUM file, atomically."""
     if len(times) != len(poses):
-        raise ValueError(f"{len(times)} timestamps for {len(poses)} poses")
+        raise LBurstValueError(f"{len(times)} timestamps for {len(poses)} poses")
     lines = [f"# {line}" for line in (header or "").splitlines()]
     lines.append("# timestamp tx ty tz qx qy qz qw")
     for time, pose in zip(times, poses):
@@ -57,7 +58,9 @@ def read_tum(path: str | Path) -> tuple[np.ndarray, list[Pose]]:
             continue
         values = line.replace(",", " ").split()
         if len(values) != 8:
-            raise ValueError(f"{path}:{number}: expected 8 values (timestamp tx ty tz qx qy qz qw), got {len(values)}")
+            raise LBurstValueError(
+                f"{path}:{number}: expected 8 values (timestamp tx ty tz qx qy qz qw), got {len(values)}"
+            )
         row = np.array([float(v) for v in values])
         times.append(row[0])
         poses.append(from_tum_row(row[1:]))

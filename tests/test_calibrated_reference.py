@@ -36,9 +36,9 @@ def make_scene(root, **reference):
 def test_auto_takes_the_reference_cameras_only_when_they_are_a_calibration(tmp_path, reference, calibrated):
     scene = make_scene(tmp_path, **reference)
     assert calibrated_reference(scene) is calibrated
-    priors, _ = scene_cameras(scene, [(48, 64)] * 2, ReconstructOptions(camera="auto"))
+    priors, _ = scene_cameras(scene, [(64, 48)] * 2, ReconstructOptions(camera="auto"))
     assert (priors[0]["params"] == CAMERA["params"]) is calibrated
-    default, _ = scene_cameras(scene, [(48, 64)] * 2, ReconstructOptions(camera="default"))
+    default, _ = scene_cameras(scene, [(64, 48)] * 2, ReconstructOptions(camera="default"))
     assert default[0]["params"] != CAMERA["params"]
 
 

@@ -80,14 +80,57 @@ def test_os_errors_are_one_line_naming_the_path(tmp_path):
     (tmp_path / "file").write_text("x")
     for out in (tmp_path / "file", tmp_path / "file" / "under"):
         proc = _cli("extract", burst, "--out", out, "--method", "sift")
-        assert proc.returncode != 0 and "Traceback" not in proc.stderr
-        assert f"{tmp_path / 'file'}" in proc.stderr.strip().splitlines()[-1], proc.stderr
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr
+        last = proc.stderr.strip().splitlines()[-1]
+        assert last.startswith("lburst extract: error: ") and f"{tmp_path / 'file'}" in last, proc.stderr
     run = tmp_path / "run"
     run.mkdir()
     (run / "last.pt").write_bytes(b"")
     proc = _cli("train", "--data", tmp_path, "--out", run, "--resume")
-    assert proc.returncode != 0 and "Traceback" not in proc.stderr
-    assert f"{run / 'last.pt'}: not a readable training state" in proc.stderr
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert f"lburst train: error: {run / 'last.pt'}: not a readable training state" in proc.stderr
+
+
+def test_errors_have_one_format_and_the_documented_exit_codes(tmp_path, capsys, monkeypatch):
+    from lburst.cli import methods as methods_command
+    from lburst.errors import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, RunFailed
+
+    # bad input: a missing photo (an lburst error) and a bad noise spec (a ValueError)
+    assert main(["simulate", "burst", str(tmp_path / "none.png"), "--out", str(tmp_path / "b")]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("lburst simulate burst: error: ") and "none.png" in err[0], err
+    assert main(["simulate", "burst", "--out", str(tmp_path / "b"), "--noise", "nope:1"]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("lburst simulate burst: error: ") and "nope:1" in err[0], err
+
+    def failed(name=None):
+        raise RunFailed("COLMAP registered no image")
+
+    monkeypatch.setattr(methods_command, "listing", failed)
+    assert main(["methods"]) == EXIT_FAILED
+    assert capsys.readouterr().err == "lburst methods: error: COLMAP registered no image\n"
+
+    def interrupted(name=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(methods_command, "listing", interrupted)
+    assert main(["methods"]) == EXIT_INTERRUPTED
+    assert capsys.readouterr().err.startswith("lburst methods: interrupted; ")
+
+
+def test_the_exit_codes_are_documented_in_help_and_readme():
+    from pathlib import Path
+
+    from lburst.errors import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+
+    text = build_parser().format_help()
+    assert "exit status:" in text and '"lburst COMMAND: error: MESSAGE"' in text
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    section = readme[readme.index("## Command line") :]
+    section = section[: section.index("\n## ", 3)]
+    assert "lburst COMMAND: error: MESSAGE" in section
+    for code in (EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED):
+        assert f"\n  {code} " in text and f"`{code}`" in section, code
 
 
 def test_a_bad_option_value_is_one_line(tmp_path):
@@ -141,3 +184,31 @@ def test_temporaries_of_a_killed_writer_are_removed_by_the_next_write(tmp_path):
         tmp.write_bytes(b"whole")
     assert not stale.exists() and live.exists() and (tmp_path / "a.npz").read_bytes() == b"whole"
     assert remove_stale_temporaries(tmp_path / "a.npz") == []
+
+
+def _defaults(words: tuple[str, ...]) -> dict:
+    sub = build_parser(words)
+    for word in words:
+        sub = next(a for a in sub._actions if a.__class__.__name__ == "_SubParsersAction").choices[word]
+    return {a.dest: a.default for a in sub._actions if a.option_strings and a.dest != "help"}
+
+
+# options that share a name but deliberately not a default, and why
+OWN_DEFAULTS = {
+    ("demo", "overlap"): "the demo's documented setting: sequential pairs, 4 next bursts (docs/defaults.md)",
+    ("demo", "out"): "the demo has a report folder of its own, outputs/demo; the others ask for one",
+}
+
+
+def test_the_same_option_has_the_same_default_in_reconstruct_bench_and_demo(tmp_path):
+    from lburst.bench.reconstruction import run_key
+
+    reconstruct = _defaults(("reconstruct",))
+    for words in (("bench", "reconstruction"), ("demo",)):
+        for dest, default in _defaults(words).items():
+            if dest in reconstruct and (words[0], dest) not in OWN_DEFAULTS:
+                assert default == reconstruct[dest], (words, dest, default, reconstruct[dest])
+    assert _defaults(("bench", "reconstruction"))["overlap"] is None  # automatic: 10 for a scene, 2 for a recording
+    # a scene's finished runs from when bench's --overlap defaulted to 10 are the same run
+    save_burst(np.zeros((1, 8, 8, 3), np.uint8), tmp_path / "scene" / "b0")
+    assert run_key(tmp_path / "scene", {"overlap": None}) == run_key(tmp_path / "scene", {"overlap": 10})

@@ -84,12 +84,13 @@ def test_features_h5_holds_every_finished_burst(tmp_path):
     assert main(["extract", bursts[0], "--out", str(out), "--method", "sift"]) == 0
     assert main(["extract", *bursts, "--out", str(out), "--method", "sift", "--h5"]) == 0  # --h5 added later
     with h5py.File(out / "features.h5") as f:
-        assert sorted(f) == ["b0", "b1"]
-        np.testing.assert_array_equal(f["b0/keypoints"][()], np.load(out / "b0.npz")["keypoints"][:, :2])
+        assert sorted(f) == ["b0.png", "b1.png"]  # named after the images in out/images
+        np.testing.assert_array_equal(f["b0.png/keypoints"][()], np.load(out / "b0.npz")["keypoints"][:, :2])
+    assert sorted(p.name for p in (out / "images").iterdir()) == ["b0.png", "b1.png"]
     (out / "features.h5").write_bytes(b"corrupt")
     assert main(["extract", *bursts, "--out", str(out), "--method", "sift", "--h5"]) == 0
     with h5py.File(out / "features.h5") as f:
-        assert sorted(f) == ["b0", "b1"]
+        assert sorted(f) == ["b0.png", "b1.png"]
 
 
 def test_a_second_h5_run_keeps_the_first_runs_bursts(tmp_path):
@@ -101,8 +102,8 @@ def test_a_second_h5_run_keeps_the_first_runs_bursts(tmp_path):
     np.savez(out / "foreign.npz", keypoints=np.zeros((3, 2)))  # not lburst's: left out
     assert main(["extract", bursts[1], "--out", str(out), "--method", "sift", "--h5"]) == 0
     with h5py.File(out / "features.h5") as f:
-        assert sorted(f) == ["b0", "b1"]
-        np.testing.assert_array_equal(f["b0/keypoints"][()], np.load(out / "b0.npz")["keypoints"][:, :2])
+        assert sorted(f) == ["b0.png", "b1.png"]
+        np.testing.assert_array_equal(f["b0.png/keypoints"][()], np.load(out / "b0.npz")["keypoints"][:, :2])
 
 
 def test_features_h5_is_written_when_no_burst_finished(tmp_path, capsys):
@@ -121,7 +122,8 @@ def test_extract_dot_names_the_output_after_the_folder(tmp_path, monkeypatch):
     burst = _small_burst(tmp_path / "here")
     monkeypatch.chdir(burst)
     assert main(["extract", ".", "--out", str(tmp_path / "out"), "--method", "sift"]) == 0
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["here.npz"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["here.npz", "images"]
+    assert [p.name for p in (tmp_path / "out" / "images").iterdir()] == ["here.png"]
 
 
 def test_a_foreign_npz_is_not_overwritten_and_a_nan_one_is_recomputed(tmp_path, capsys):

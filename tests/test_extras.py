@@ -77,7 +77,8 @@ def test_cli_prints_one_line_for_a_missing_extra(tmp_path):
     out = run_python(code, block=("skimage",))
     assert out.returncode == 2
     assert out.stderr.strip() == (
-        "lburst: the default photo (give IMAGE instead) needs scikit-image: pip install 'lburst[sfm]'"
+        "lburst simulate burst: error: the default photo (give IMAGE instead) needs scikit-image: "
+        "pip install 'lburst[sfm]'"
     )
 
 
@@ -114,7 +115,9 @@ def _cli(args: list[str], block: tuple[str, ...]) -> subprocess.CompletedProcess
 def test_simulating_a_video_without_pyav_says_what_to_install(tmp_path):
     out = _cli(["simulate", "flight", "--video", str(tmp_path / "f.mp4"), "--bursts", "2", "--size", "64x48"], ("av",))
     assert out.returncode == 2
-    assert out.stderr.strip() == "lburst: writing a video (--video) needs av: pip install 'lburst[video]'"
+    assert out.stderr.strip() == (
+        "lburst simulate flight: error: writing a video (--video) needs av: pip install 'lburst[video]'"
+    )
     assert not (tmp_path / "f.mp4").exists()
 
 
@@ -124,7 +127,9 @@ def test_reading_a_video_without_pyav_says_what_to_install(tmp_path, command):
     video.write_bytes(b"\x00" * 64)  # never opened: PyAV is missing
     out = _cli([command, str(video), "--every", "8", "--method", "orb", "--out", str(tmp_path / "o")], ("av",))
     assert out.returncode == 2
-    assert out.stderr.strip().splitlines()[-1] == "lburst: reading a video needs av: pip install 'lburst[video]'"
+    assert out.stderr.strip().splitlines()[-1] == (
+        f"lburst {command}: error: reading a video needs av: pip install 'lburst[video]'"
+    )
     assert "Traceback" not in out.stderr
 
 
@@ -139,7 +144,9 @@ def test_reading_dng_frames_without_rawpy_says_what_to_install(tmp_path, command
         ("rawpy",),
     )
     assert out.returncode == 2
-    assert out.stderr.strip().splitlines()[-1] == "lburst: reading DNG frames needs rawpy: pip install 'lburst[raw]'"
+    assert out.stderr.strip().splitlines()[-1] == (
+        f"lburst {command}: error: reading DNG frames needs rawpy: pip install 'lburst[raw]'"
+    )
     assert "Traceback" not in out.stderr
 
 

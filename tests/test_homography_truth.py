@@ -55,6 +55,7 @@ def test_bench_homography_stops_on_it_in_one_line(tmp_path, capsys, kind):
     assert code != 0 and "Traceback" not in err
     errors = [line for line in err.replace("\r", "\n").splitlines() if "error:" in line]
     assert len(errors) == 1 and "broken/H1to3p: homography" in errors[0], err
+    assert "lburst bench homography: error: " in errors[0] and code == 2, err  # after an unfinished progress bar
 
 
 def test_a_good_homography_still_reads(tmp_path):

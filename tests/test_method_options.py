@@ -131,6 +131,7 @@ def test_lburst_methods_lists_every_method_and_matcher_with_defaults(capsys):
     only = capsys.readouterr().out
     assert "root=false  (bool)" in only and "buff" not in only
     assert main(["methods", "nope"]) == 2
+    assert capsys.readouterr().err.startswith("lburst methods: error: unknown method or matcher 'nope'")
 
 
 def test_a_checkpoint_path_with_commas_loads_and_keeps_its_options(tmp_path):

@@ -250,8 +250,14 @@ def test_command_line(tmp_path, capsys):
     )
     assert Reference.load(out / "reference.json").camera["width"] == 48
     assert len(list((out / "0001").glob("frame_*.png"))) == 3
-    assert flight_command.main(parser.parse_args([str(out), "--frames", "4"])) == 2
-    assert "odd" in capsys.readouterr().err
+    capsys.readouterr()
+    with pytest.raises(ValueError, match="odd"):  # the command raises; lburst.cli.main prints it
+        flight_command.main(parser.parse_args([str(out), "--frames", "4"]))
+    from lburst.cli import main
+
+    assert main(["simulate", "flight", str(out), "--frames", "4"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lburst simulate flight: error: ") and "odd" in err[0], err
 
 
 @pytest.mark.slow

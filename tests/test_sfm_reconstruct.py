@@ -33,8 +33,9 @@ def test_empty_folder(tmp_path, capsys):
     (tmp_path / "scene").mkdir()
     with pytest.raises(ReconstructionError, match="no bursts"):
         reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", progress=False)
-    assert cli(["reconstruct", str(tmp_path / "scene"), "--method", "sift", "--out", str(tmp_path / "out")]) == 1
-    assert "no bursts" in capsys.readouterr().err
+    assert cli(["reconstruct", str(tmp_path / "scene"), "--method", "sift", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lburst reconstruct: error: ") and "no bursts" in err[0], err
 
 
 def test_one_image(tmp_path):
@@ -62,7 +63,8 @@ def test_unrelated_images_register_nothing_without_crashing(tmp_path, capsys):
     for i in range(3):
         write_png(tmp_path / "scene" / f"{i}.png", noise_image(i))
     assert cli(["reconstruct", str(tmp_path / "scene"), "--method", "sift", "--out", str(tmp_path / "out")]) == 1
-    assert "registered no images" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("lburst reconstruct: error: no model") and "registered no images" in err[-1], err
     result = ReconstructionResult.load(tmp_path / "out" / "result.json")
     assert not result.converged and result.registered == [] and result.error is None
     assert result.metrics["registered_pct"] == 0 and result.metrics["keypoints_per_image"] > 0

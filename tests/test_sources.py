@@ -249,7 +249,9 @@ def test_a_recording_that_fails_before_two_keyframes_still_writes_result_json(tm
 
     folder = _folder(tmp_path, range(12))
     (folder / "img_0.png").write_bytes(b"\x89PNG not an image")
-    assert main(["reconstruct", str(folder), "--method", "sift", "--every", "4", "--out", str(tmp_path / "out")]) == 1
-    assert "img_0.png: not a readable image" in capsys.readouterr().err
+    # nothing to reconstruct from (no keyframe read): an input that cannot be used, exit 2
+    assert main(["reconstruct", str(folder), "--method", "sift", "--every", "4", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("lburst reconstruct: error: ") and "img_0.png: not a readable image" in err[-1], err
     result = json.loads((tmp_path / "out" / "result.json").read_text())
     assert "img_0.png" in result["source_error"] and "no model" in result["error"] and result["registered"] == []

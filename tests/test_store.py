@@ -1,6 +1,8 @@
 """The features store keys on content and weights: changed frames or retrained weights are
 never served old features (``lburst reconstruct`` and ``lburst extract`` share it)."""
 
+import json
+
 import cv2
 import numpy as np
 
@@ -26,9 +28,9 @@ def test_the_key_follows_the_weights_file_and_the_frames(tmp_path):
     assert store.method_key(f"r2d2:{ckpt}", top_k=200) != store.method_key(f"r2d2:{ckpt}", top_k=100)
     image = tmp_path / "a.png"
     cv2.imwrite(str(image), _photo(0))
-    key = store.burst_key(before, image)
+    key = store.key(before, image)
     cv2.imwrite(str(image), _photo(1))
-    assert store.burst_key(before, image) != key
+    assert store.key(before, image) != key
 
 
 def test_reconstruct_computes_a_changed_burst_again(tmp_path):
@@ -43,3 +45,75 @@ def test_reconstruct_computes_a_changed_burst_again(tmp_path):
     assert len(stored["keypoints"]) == len(create("sift")(np.zeros((1, 120, 160, 3), np.uint8))["keypoints"]) == 0
     assert read_image(out / "images" / "1.png").max() == 0
     assert len(np.load(out / "features" / "0.npz")["keypoints"]) > 0
+
+
+def test_an_option_at_its_default_value_does_not_change_the_key():
+    """`lburst extract` passes --top-k 4000, `lburst reconstruct` none: the same features."""
+    assert (
+        store.method_key("lburst", top_k=4000) == store.method_key("lburst") == store.method_key("lburst", top_k=None)
+    )
+    assert store.method_key("lburst", top_k=2000) != store.method_key("lburst")
+    assert store.method_key("lburst,top_k=2000", top_k=4000) != store.method_key("lburst,top_k=2000")
+    assert store.method_key("sift") == {"spec": "sift", "options": {}}
+
+
+def test_reconstruct_uses_the_keyframe_features_that_extract_stored(tmp_path, monkeypatch):
+    """`lburst extract REC` then `lburst reconstruct REC --features OUT` (or the same --out) with the
+    same method and cut: one key (:func:`lburst.store.key`), so no keyframe is extracted again."""
+    import lburst.methods
+    from lburst.cli import main
+    from lburst.scenes.flight_recording import write_flight_png
+    from lburst.scenes.night_flight import NightFlightConfig
+
+    cfg = NightFlightConfig.daylight(n_bursts=3, width=256, height=192, noise="none")
+    frames = write_flight_png(tmp_path / "frames", cfg, progress=False)
+    cut = ["--every", "16", "--burst", "3", "--method", "sift,max_features=1500"]
+    extracted = tmp_path / "extracted"
+    assert main(["extract", str(frames), *cut, "--out", str(extracted)]) == 0
+    stored = {p: p.stat().st_mtime_ns for p in (extracted / "frames").glob("*.npz")}
+    assert len(stored) == 5
+
+    calls = []
+
+    def counting(spec, **options):
+        extractor = create(spec, **options)
+
+        def run(burst):
+            calls.append(spec)
+            return extractor(burst)
+
+        return run
+
+    monkeypatch.setattr(lburst.methods, "create", counting)
+    for out, given in ((tmp_path / "rec", ["--features", str(extracted)]), (extracted, [])):
+        assert main(["reconstruct", str(frames), *cut, "--out", str(out), "--threads", "1", *given]) == 0
+        assert calls == []  # every keyframe's features came from the store
+        assert {p: p.stat().st_mtime_ns for p in stored} == stored
+        result = json.loads((out / "result.json").read_text())
+        assert len(result["names"]) == 5 and result["registered"] == result["names"]
+        for name in result["names"]:
+            np.testing.assert_array_equal(
+                np.load(out / "features" / f"{name}.npz")["keypoints"],
+                np.load(extracted / "frames" / f"{name}.npz")["keypoints"],
+            )
+    # another cut of the recording is other bursts: extracted now
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(frames),
+                *cut[:-4],
+                "--burst",
+                "1",
+                *cut[-2:],
+                "--out",
+                str(tmp_path / "b1"),
+                "--features",
+                str(extracted),
+                "--threads",
+                "1",
+            ]
+        )
+        == 0
+    )
+    assert len(calls) == 5

@@ -48,6 +48,7 @@ from tqdm import tqdm
 from lburst import store
 from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, rotation_deg
 from lburst.bench.sequences import Sequence, list_sequences, read_sequence, rotate_sequence
+from lburst.errors import LBurstOSError, LBurstValueError
 from lburst.features import Features
 from lburst.io import atomic_path
 from lburst.methods import method_slug
@@ -165,7 +166,7 @@ def stored_features(
     """The runner's features of one burst and the seconds they took: from the store at ``path``
     when it holds them under the same key, else computed and stored.  Either way they are
     returned as stored, so a rerun gives the same numbers."""
-    key = store.burst_key(runner.method, source, burst_sha1(image, burst, motion))
+    key = store.key(runner.method, source, burst_sha1(image, burst, motion))
     found = store.load(path, key)
     if found is None:
         start = time.perf_counter()
@@ -174,7 +175,7 @@ def stored_features(
         store.save(path, feats, (image.shape[1], image.shape[0]), key, seconds=seconds)
         found = store.load(path, key)
         if found is None:
-            raise OSError(f"{path}: features just written cannot be read back")
+            raise LBurstOSError(f"{path}: features just written cannot be read back")
     return found[0], float(found[2]["seconds"])
 
 
@@ -241,7 +242,7 @@ def run_homography_benchmark(
     out = Path(out)
     match = create(matcher)
     if not isinstance(every, int) or every < 1:
-        raise ValueError(f"every must be an integer >= 1, got {every!r}")
+        raise LBurstValueError(f"every must be an integer >= 1, got {every!r}")
     folders = list_sequences(data)[::every]
     levels = noise_levels(list(sigmas), list(noise_specs), motion)
     runners = {spec: MethodRunner(spec, top_k) for spec in methods}

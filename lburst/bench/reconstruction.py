@@ -60,7 +60,16 @@ def scene_sha1(scene: Path) -> str:
 
 
 def run_key(scene: Path, options: dict[str, Any]) -> dict[str, Any]:
-    """What a finished run depends on besides the method: the scene's content and the options."""
+    """What a finished run depends on besides the method: the scene's content and the options.
+    An automatic ``overlap`` (``None``) is keyed by the value it takes, 10 for a scene and 2 for
+    a recording (as :func:`lburst.sfm.reconstruct.pair_plan` sets it), so a scene's finished runs
+    from when ``--overlap`` defaulted to 10 are still the same run."""
+    if "overlap" in options and options["overlap"] is None:
+        from lburst.sfm.reconstruct import RECORDING_OVERLAP, SCENE_OVERLAP
+        from lburst.sources import is_recording
+
+        recording = is_recording(scene, options.get("recording"))
+        options = {**options, "overlap": RECORDING_OVERLAP if recording else SCENE_OVERLAP}
     return {"scene": scene_sha1(scene), "options": {k: str(v) for k, v in sorted(options.items()) if k != "progress"}}
 
 

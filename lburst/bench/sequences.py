@@ -10,7 +10,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from lburst.io import BurstError, read_image, to_uint8
+from lburst.errors import LBurstFileNotFoundError, LBurstValueError
+from lburst.io import IMAGE_SUFFIXES, BurstError, read_image, to_uint8
 
 
 @dataclass
@@ -28,25 +29,21 @@ class Sequence:
 
 
 def _find_image(folder: Path, stem: str) -> Path:
-    hits = sorted(
-        p
-        for p in folder.glob(f"{stem}.*")
-        if p.suffix.lower() in (".png", ".ppm", ".jpg", ".jpeg", ".pgm", ".tif", ".tiff")
-    )
+    hits = sorted(p for p in folder.glob(f"{stem}.*") if p.suffix.lower() in IMAGE_SUFFIXES)
     if not hits:
-        raise FileNotFoundError(f"{folder}: no image {stem}.png/.ppm/...")
+        raise LBurstFileNotFoundError(f"{folder}: no image {stem}.png/.ppm/...")
     return hits[0]
 
 
 def _read_h(path: Path) -> np.ndarray:
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: homography file missing")
+        raise LBurstFileNotFoundError(f"{path}: homography file missing")
     try:
         h = np.loadtxt(path, dtype=np.float64)
     except ValueError as exc:
-        raise ValueError(f"{path}: not a 3x3 matrix of numbers ({exc})") from exc
+        raise LBurstValueError(f"{path}: not a 3x3 matrix of numbers ({exc})") from exc
     if h.shape != (3, 3):
-        raise ValueError(f"{path}: expected a 3x3 matrix, got shape {h.shape}")
+        raise LBurstValueError(f"{path}: expected a 3x3 matrix, got shape {h.shape}")
     return check_homography(h, path)
 
 
@@ -54,10 +51,10 @@ def check_homography(h: np.ndarray, where: str | Path) -> np.ndarray:
     """``h`` if it is a usable ground-truth homography: finite and invertible (its smallest
     singular value above 1e-9 of its largest); else ``ValueError`` naming ``where``."""
     if not np.all(np.isfinite(h)):
-        raise ValueError(f"{where}: homography holds NaN or inf")
+        raise LBurstValueError(f"{where}: homography holds NaN or inf")
     singular = np.linalg.svd(h, compute_uv=False)
     if singular[0] == 0 or singular[-1] <= 1e-9 * singular[0]:
-        raise ValueError(f"{where}: homography is singular (rank {int(np.sum(singular > 1e-9 * singular[0]))})")
+        raise LBurstValueError(f"{where}: homography is singular (rank {int(np.sum(singular > 1e-9 * singular[0]))})")
     return h
 
 
@@ -78,7 +75,7 @@ def read_sequence(folder: str | Path, max_side: int | None = None) -> Sequence:
     try:
         images = [read_image(_find_image(folder, s)) for s in stems]
     except BurstError as exc:
-        raise ValueError(str(exc)) from exc
+        raise LBurstValueError(str(exc)) from exc
     images = [to_uint8(im) for im in images]
     homographies = [_read_h(folder / f) for f in hfiles]
     if max_side:
@@ -113,8 +110,8 @@ def list_sequences(data: str | Path) -> list[Path]:
     """Sequence folders under ``data`` (sorted); error if none."""
     data = Path(data)
     if not data.is_dir():
-        raise FileNotFoundError(f"{data}: no such folder")
+        raise LBurstFileNotFoundError(f"{data}: no such folder")
     folders = sorted(p for p in data.iterdir() if p.is_dir() and ((p / "H1to2p").exists() or (p / "H_1_2").exists()))
     if not folders:
-        raise FileNotFoundError(f"{data}: no sequence folders (with H1to2p or H_1_2)")
+        raise LBurstFileNotFoundError(f"{data}: no sequence folders (with H1to2p or H_1_2)")
     return folders

@@ -12,6 +12,8 @@ import os
 import sys
 import warnings
 
+from lburst.errors import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, LBurstError
+
 # (subcommand words, module, one-line help)
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("extract",), "lburst.cli.extract", "features of bursts to .npz (and hloc features.h5)"),
@@ -93,7 +95,10 @@ def _fill_help(parser: argparse.ArgumentParser) -> None:
 def build_parser(load: tuple[str, ...] | None = None) -> argparse.ArgumentParser:
     """The parser; only the subcommand ``load`` has its module imported for its options."""
     parser = argparse.ArgumentParser(
-        prog="lburst", description="Features from low-light robotic bursts.", formatter_class=HelpFormatter
+        prog="lburst",
+        description="Features from low-light robotic bursts.",
+        epilog=EXIT_STATUS,
+        formatter_class=HelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"lburst {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -115,6 +120,19 @@ def build_parser(load: tuple[str, ...] | None = None) -> argparse.ArgumentParser
     return parser
 
 
+EXIT_STATUS = f"""\
+exit status:
+  {EXIT_OK}    finished
+  {EXIT_FAILED}    ran, but some of its work failed (an input it skipped, no model, a recording
+       cut short); what it finished is kept
+  {EXIT_BAD_INPUT}    did nothing: bad options or input (usage, a bad spec or value, a missing or
+       unreadable file, a missing optional extra, an output folder in use)
+  {EXIT_INTERRUPTED}  interrupted; finished work is kept and a re-run resumes
+
+An error is one line on stderr, "lburst COMMAND: error: MESSAGE" (LBURST_TRACEBACK=1 shows
+the traceback instead)."""
+
+
 def error_line(exc: BaseException) -> str:
     """One line for an error from bad input or the operating system: an OSError names its
     file and says why (``PATH: Permission denied``), anything else is its message."""
@@ -123,6 +141,17 @@ def error_line(exc: BaseException) -> str:
         return f"{where}: {exc.strerror}"
     text = str(exc) or type(exc).__name__
     return " ".join(text.split("\n")[:1]) if isinstance(exc, OSError) else text
+
+
+def error_message(command: str, exc: BaseException | str) -> str:
+    """The one format of every error the ``lburst`` command prints: ``lburst COMMAND: error: MESSAGE``."""
+    text = exc if isinstance(exc, str) else error_line(exc)
+    return f"lburst{' ' + command if command else ''}: error: {text}"
+
+
+def exit_code(exc: BaseException) -> int:
+    """The exit status for an error that ends a command (see :data:`EXIT_STATUS`)."""
+    return getattr(exc, "exit_code", EXIT_BAD_INPUT) if isinstance(exc, LBurstError) else EXIT_BAD_INPUT
 
 
 def _one_line_warning(message, category, filename, lineno, line=None) -> str:
@@ -137,31 +166,32 @@ def _words(argv: list[str]) -> tuple[str, ...] | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from lburst.extras import MissingExtra
-
+    """The ``lburst`` command: its exit status, :data:`EXIT_STATUS`.  Every error that lburst
+    raises on purpose (:class:`lburst.LBurstError`) and every ``ValueError`` or ``OSError``
+    ends it here, printed as one line by :func:`error_message`."""
     argv = sys.argv[1:] if argv is None else argv
     for stream in (sys.stdout, sys.stderr):  # file names that are not valid UTF-8 print escaped
         if hasattr(stream, "reconfigure"):
             stream.reconfigure(errors="backslashreplace")
     warnings.formatwarning = _one_line_warning
     words = _words(argv)
+    command = " ".join(words or argv[:1])
     try:
         parser = build_parser(words)
         args = parser.parse_args(argv)
         if not hasattr(args, "_module"):
             getattr(args, "_group", parser).print_help()
-            return 2
+            return EXIT_BAD_INPUT
         module = importlib.import_module(args._module)
-        return int(module.main(args) or 0)
-    except MissingExtra as exc:  # an optional dependency: the message names the extra to install
-        print(f"lburst: {exc}", file=sys.stderr)
-        return 2
-    except (OSError, ValueError) as exc:  # bad input or the operating system: one line, no traceback
+        return int(module.main(args) or EXIT_OK)
+    except (LBurstError, OSError, ValueError) as exc:  # bad input, a failed run, the OS: one line, no traceback
         if os.environ.get("LBURST_TRACEBACK"):
             raise
-        command = " ".join(words or argv[:1])
-        print(f"lburst {command}: error: {error_line(exc)}", file=sys.stderr)
-        return 1
+        print(error_message(command, exc), file=sys.stderr)
+        return exit_code(exc)
     except KeyboardInterrupt:
-        print("interrupted; finished work is kept and a re-run resumes", file=sys.stderr)
-        return 130
+        print(
+            f"lburst{' ' + command if command else ''}: interrupted; finished work is kept and a re-run resumes",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED

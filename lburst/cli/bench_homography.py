@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from lburst.bench.homography import MotionRange, markdown, run_homography_benchmark
@@ -60,24 +59,20 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    try:
-        motion = MotionRange(args.burst_rotation, args.burst_zoom, args.burst_flow)
-        results = run_homography_benchmark(
-            args.data,
-            args.methods,
-            args.sigma,
-            args.out,
-            args.noise,
-            args.max_side,
-            args.top_k,
-            motion=motion,
-            matcher=args.matcher,
-            every=args.every,
-            rotation=args.rotation,
-        )
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    motion = MotionRange(args.burst_rotation, args.burst_zoom, args.burst_flow)
+    results = run_homography_benchmark(
+        args.data,
+        args.methods,
+        args.sigma,
+        args.out,
+        args.noise,
+        args.max_side,
+        args.top_k,
+        motion=motion,
+        matcher=args.matcher,
+        every=args.every,
+        rotation=args.rotation,
+    )
     print(markdown(results))
     print(f"results: {args.out / 'results.json'}, {args.out / 'results.md'}, {args.out / 'mma.png'}")
     return 0

@@ -9,6 +9,7 @@ from lburst.bench.reconstruction import run_benchmark
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
 from lburst.io import atomic_path
+from lburst.sfm.reconstruct import RECORDING_OVERLAP, SCENE_OVERLAP
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -16,7 +17,12 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--methods", nargs="+", default=["sift", "merge+sift", "lburst"], help="method specs")
     parser.add_argument("--out", required=True, help="output folder: OUT/<method>/<scene>/, table.md, results.json")
     parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto")
-    parser.add_argument("--overlap", type=integer(1), default=10)
+    parser.add_argument(
+        "--overlap",
+        type=integer(1),
+        help=f"sequential pairs: neighbours on each side (default {SCENE_OVERLAP} for a scene, "
+        f"{RECORDING_OVERLAP} for a recording, as in lburst reconstruct)",
+    )
     parser.add_argument("--fallback-exhaustive", action="store_true")
     parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
     parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")

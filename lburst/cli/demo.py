@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from lburst.cli.numbers import integer
@@ -28,10 +27,6 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    try:
-        methods = args.methods or [lburst_spec(args.weights), "sift"]
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    methods = args.methods or [lburst_spec(args.weights), "sift"]
     run_demo(args.out, methods, args.noise, args.bursts, args.seed, args.overlap, args.matcher)
     return 0

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import torch
 
 from lburst.cli.numbers import integer
-from lburst.model.network import CheckpointError, load_checkpoint
+from lburst.model.network import load_checkpoint
 from lburst.model.onnx import OnnxRunner, export_onnx
 from lburst.model.runtimes import inference_form
 from lburst.weights import resolve_weights
@@ -26,11 +25,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     args.checkpoint = resolve_weights(args.checkpoint)
-    try:
-        out = export_onnx(args.checkpoint, args.out, args.opset)
-    except CheckpointError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    out = export_onnx(args.checkpoint, args.out, args.opset)
     print(f"wrote {out}")
     if args.check:
         net, _ = load_checkpoint(args.checkpoint, "cpu")

@@ -4,11 +4,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
-from lburst.model.network import CheckpointError
 from lburst.paths import shared_dir
 
 
@@ -30,11 +28,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     from lburst.train.whitening import sample_photos, whiten_checkpoint
 
-    try:
-        photos = sample_photos(args.photos or [args._default_photos], args.count, args.seed)
-        whiten_checkpoint(args.checkpoint, args.out, photos, seed=args.seed, power=args.power)
-    except (CheckpointError, FileNotFoundError, ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    photos = sample_photos(args.photos or [args._default_photos], args.count, args.seed)
+    whiten_checkpoint(args.checkpoint, args.out, photos, seed=args.seed, power=args.power)
     print(f"wrote {args.out} (descriptor statistics of {len(photos)} training photos)")
     return 0

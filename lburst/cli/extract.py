@@ -5,9 +5,14 @@ Each ``.npz`` records what made it (:mod:`lburst.store`: the method spec, its we
 SHA-1 and options, the burst's path and content SHA-1); a re-run skips a burst only when
 its file holds the same burst by the same method, and recomputes it otherwise.  A name
 that two different bursts map to (``a/b0`` and ``c/b0``) is refused for the second.
+The common frame of each burst (the frame its features describe) is written as
+``OUT/images/<name>.png`` (a recording's keyframe: ``OUT/images/<recording>/<keyframe>.png``).
 ``features.h5`` is written at the end from every lburst ``.npz`` in the output folder
 (this run's and earlier runs'; of a recording, its last cut's keyframes, listed in
-``OUT/<recording>/cut.json``), as hloc expects one features file per folder.  Every file is
+``OUT/<recording>/cut.json``), as hloc expects one features file per folder, with groups
+named after those images (``<name>.png``, ``<recording>/<keyframe>.png``), so that hloc reads
+an image from ``OUT/images`` and its keypoints from ``features.h5`` by one name.  Features are
+keyed as ``lburst reconstruct`` keys them (:func:`lburst.store.key`).  Every file is
 written atomically, and a burst that fails is reported and skipped: the exit code is 1 if any failed.
 """
 
@@ -28,6 +33,7 @@ from lburst.io import BurstError, atomic_path, check_output_outside, load_burst,
 from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
 from lburst.model.runtimes import RUNTIMES
+from lburst.sfm.outputs import IMAGES, write_common_frame
 from lburst.sources import is_recording, open_recording
 
 CUT_FILE = "cut.json"
@@ -101,19 +107,19 @@ def extract_recording(
     returns (extracted, already done, why reading stopped or ``None``) and appends the
     finished keyframes to ``finished``.  Keyframes finished before a bad frame are kept.
     ``OUT/<recording>/cut.json`` lists this cut's keyframes (:func:`write_cut`): a cut with
-    other options leaves the earlier cut's files, unlisted, and says so."""
-    from lburst.sfm.recording import cache_key
-
+    other options leaves the earlier cut's files, unlisted, and says so.  The common frame of
+    each keyframe goes to ``OUT/images/<recording>/<keyframe>.png``."""
     folder = args.out / burst_name(path)
     done = skipped = 0
     names: list[str] = []
     options = recording_options(args)
     try:
         recording = open_recording(path, options)
-        content = cache_key(recording)
+        content = store.recording_content(recording)
         for keyframe, burst in recording.bursts():
             target = folder / f"{keyframe.name}.npz"
-            key = store.burst_key(method, path, f"{content}|{keyframe.name}")
+            image = args.out / IMAGES / burst_name(path) / f"{keyframe.name}.png"
+            key = store.key(method, path, content, keyframe=keyframe.name)
             if not args.overwrite and store.load(target, key) is not None:
                 skipped += 1
             else:
@@ -121,8 +127,10 @@ def extract_recording(
                 folder.mkdir(parents=True, exist_ok=True)
                 store.save(target, features, (burst.shape[2], burst.shape[1]), key)
                 done += 1
+            if not image.is_file() or image.stat().st_mtime < target.stat().st_mtime:
+                write_common_frame(image, burst)
             names.append(keyframe.name)
-            finished.append((f"{burst_name(path)}/{keyframe.name}", target))
+            finished.append((image.relative_to(args.out / IMAGES).as_posix(), target))
     except (BurstError, ValueError, OSError) as exc:
         write_cut(folder, path, options, names)
         return done, skipped, str(exc)
@@ -148,11 +156,15 @@ def write_cut(folder: Path, path: Path, options, names: list[str]) -> None:
 
 def features_in_folder(out: Path) -> dict[str, Path]:
     """features.h5 group -> ``.npz`` of every lburst features file in ``out`` (a burst's
-    ``NAME.npz``, a recording's ``REC/KEYFRAME.npz``); files without lburst's metadata are left out."""
+    ``NAME.npz``: group ``NAME.png``, a recording's ``REC/KEYFRAME.npz``: ``REC/KEYFRAME.png``, the
+    names of their images in ``out/images``); files without lburst's metadata are left out, and so is
+    the features cache of a ``lburst reconstruct --out`` into the same folder (``out/features``)."""
     found = {}
     for npz in sorted(list(out.glob("*.npz")) + list(out.glob("*/*.npz"))):
+        if npz.parent == out / "features" and not (npz.parent / CUT_FILE).is_file():
+            continue
         if store.read_meta(npz) is not None and npz.stem in this_cut(npz.parent, npz.stem):
-            found[npz.relative_to(out).with_suffix("").as_posix()] = npz
+            found[npz.relative_to(out).with_suffix(".png").as_posix()] = npz
     return found
 
 
@@ -178,7 +190,8 @@ def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
 def extract_burst(
     path: Path, extractor, args: argparse.Namespace, method: dict, names: dict[str, Path]
 ) -> tuple[str, Path, bool]:
-    """Features of one burst into ``OUT/<name>.npz``: (name, file, whether computed now).
+    """Features of one burst into ``OUT/<name>.npz`` and its common frame into
+    ``OUT/images/<name>.png``: (name, file, whether computed now).
     ``BurstError`` when the name is taken by another burst (in this run or on disk)."""
     if not path.exists():
         raise BurstError(f"{path}: no such file or folder")
@@ -189,9 +202,12 @@ def extract_burst(
         raise BurstError(
             f"{path}: same output name {name!r} as {names[name]} in this run; extract one of them into another --out"
         )
-    key = store.burst_key(method, path)
+    key = store.key(method, path)
+    image = args.out / IMAGES / f"{name}.png"
     if target.exists() and not args.overwrite:
         if store.load(target, key) is not None:
+            if not image.is_file() or image.stat().st_mtime < target.stat().st_mtime:
+                write_common_frame(image, load_burst(path))  # features of an earlier run without it
             return name, target, False
         if store.is_foreign(target):
             raise BurstError(
@@ -205,6 +221,7 @@ def extract_burst(
             )
     burst = load_burst(path)
     store.save(target, extractor(burst), (burst.shape[2], burst.shape[1]), key)
+    write_common_frame(image, burst)
     return name, target, True
 
 
@@ -221,9 +238,8 @@ def main(args: argparse.Namespace) -> int:
         }
         options = {k: v for k, v in wanted.items() if v is not None and accepts(spec, k)}  # learned methods have them
         extractor = create(spec, **options)
-    except (CheckpointError, FileNotFoundError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    except (CheckpointError, FileNotFoundError, ValueError):
+        raise  # lburst.cli.main prints it as one line and exits with 2
     args.out.mkdir(parents=True, exist_ok=True)
     method = store.method_key(spec, **{k: v for k, v in options.items() if k != "device"})
     failed: list[tuple[Path, str]] = []
@@ -232,9 +248,8 @@ def main(args: argparse.Namespace) -> int:
     done = 0
     try:
         cut = recording_options(args)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    except ValueError:
+        raise  # lburst.cli.main prints it as one line and exits with 2
     for path in tqdm(args.bursts, desc=f"extract {spec}", unit="burst"):
         if is_recording(path, cut) and (path.is_dir() or cut.frame_folders):
             new, old, problem = extract_recording(path, extractor, args, method, finished)
@@ -251,7 +266,7 @@ def main(args: argparse.Namespace) -> int:
             failed.append((path, str(exc)))
             tqdm.write(f"skipped {exc if str(exc).startswith(str(path)) else f'{path}: {exc}'}", file=sys.stderr)
             continue
-        finished.append((name, target))
+        finished.append((f"{name}.png", target))
         done += computed
     if args.h5:
         write_h5(args.out / "features.h5", sorted({**features_in_folder(args.out), **dict(finished)}.items()))

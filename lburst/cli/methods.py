@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from lburst.errors import LBurstValueError
 from lburst.methods.options import format_default, option_table
 
 
@@ -46,7 +47,6 @@ def main(args: argparse.Namespace) -> int:
 
     known = set(methods.available()) | {m.name for m in matching.available()}
     if args.name is not None and args.name not in known:
-        print(f"lburst methods: unknown method or matcher {args.name!r}; known: {', '.join(sorted(known))}")
-        return 2
+        raise LBurstValueError(f"unknown method or matcher {args.name!r}; known: {', '.join(sorted(known))}")
     print(listing(args.name))
     return 0

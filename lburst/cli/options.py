@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from lburst.cli.numbers import integer, real
+from lburst.errors import LBurstValueError
 from lburst.keyframes import MotionGate
 from lburst.matching import DEFAULT, available, create
 from lburst.sources import DEFAULT_FPS, Normalisation, RecordingOptions
@@ -56,7 +57,7 @@ def recording_options(args) -> RecordingOptions:
     """:class:`RecordingOptions` from :func:`add_recording_arguments`' options (``ValueError`` if bad);
     ``--every`` or ``--motion`` make a folder of plain frames a recording (``frame_folders``)."""
     if args.every is not None and args.motion is not None:
-        raise ValueError("give --every or --motion, not both")
+        raise LBurstValueError("give --every or --motion, not both")
     return RecordingOptions(
         burst=args.burst_frames,
         every=args.every or 10,

@@ -4,11 +4,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
 from lburst.cli.options import add_matcher_argument, add_recording_arguments, recording_options
+from lburst.errors import RunFailed
 from lburst.sfm.reconstruct import (
     AUTO_EXHAUSTIVE_MAX,
     LOOP_FRACTION,
@@ -17,7 +17,6 @@ from lburst.sfm.reconstruct import (
     RECORDING_OVERLAP,
     RECORDING_RETRIEVAL,
     SCENE_OVERLAP,
-    ReconstructionError,
     reconstruct_scene,
 )
 
@@ -33,6 +32,12 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--method", default="lburst", help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...)"
     )
     parser.add_argument("--out", required=True, help="output folder (features cache, COLMAP files, result.json)")
+    parser.add_argument(
+        "--features",
+        metavar="DIR",
+        help="a folder that `lburst extract --out DIR` wrote: features it stored for the same bursts with the "
+        "same method are used, not computed again (default: --out)",
+    )
     parser.add_argument(
         "--pairs",
         choices=("auto", "exhaustive", "sequential"),
@@ -113,41 +118,36 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    try:
-        result = reconstruct_scene(
-            args.scene,
-            args.method,
-            args.out,
-            pairs=args.pairs,
-            overlap=args.overlap,
-            fallback_exhaustive=args.fallback_exhaustive,
-            mapper=args.mapper,
-            camera=args.camera,
-            camera_model=args.camera_model,
-            single_camera=args.single_camera,
-            fix_intrinsics=args.fix_intrinsics,
-            num_threads=args.threads,
-            seed=args.seed,
-            matcher=args.matcher,
-            retrieval=args.retrieval,
-            near=args.near,
-            loop_fraction=args.loop_fraction,
-            abs_pose_inliers=args.abs_pose_inliers,
-            mapper_threads=args.mapper_threads,
-            recording=recording_options(args),
-        )
-    except (ReconstructionError, ValueError) as err:
-        print(f"lburst reconstruct: {err}", file=sys.stderr)
-        return 1
+    result = reconstruct_scene(
+        args.scene,
+        args.method,
+        args.out,
+        pairs=args.pairs,
+        overlap=args.overlap,
+        fallback_exhaustive=args.fallback_exhaustive,
+        mapper=args.mapper,
+        camera=args.camera,
+        camera_model=args.camera_model,
+        single_camera=args.single_camera,
+        fix_intrinsics=args.fix_intrinsics,
+        num_threads=args.threads,
+        seed=args.seed,
+        matcher=args.matcher,
+        retrieval=args.retrieval,
+        near=args.near,
+        loop_fraction=args.loop_fraction,
+        abs_pose_inliers=args.abs_pose_inliers,
+        mapper_threads=args.mapper_threads,
+        recording=recording_options(args),
+        features=args.features,
+    )
     from lburst.sfm.metrics import markdown_table
 
     print(markdown_table([{"method": result.method, "scene": Path(result.scene).name, **result.metrics}]))
     if result.error:
-        print(f"lburst reconstruct: {result.error}", file=sys.stderr)
-        return 1
+        raise RunFailed(result.error)
     if not result.converged:
-        print(f"lburst reconstruct: no model: COLMAP registered no images of {args.scene}", file=sys.stderr)
-        return 1
+        raise RunFailed(f"no model: COLMAP registered no images of {args.scene}")
     model = Path(args.out) / "colmap" / "model"
     print(
         f"{len(result.registered)}/{len(result.names)} images registered; model in {model} (pycolmap.Reconstruction opens it)"
@@ -155,9 +155,5 @@ def main(args: argparse.Namespace) -> int:
     if result.metrics.get("camera"):
         print(f"camera: {result.metrics['camera']}")
     if result.source_error:
-        print(
-            f"lburst reconstruct: {result.source_error} (the {len(result.names)} keyframes before it were used)",
-            file=sys.stderr,
-        )
-        return 1
+        raise RunFailed(f"{result.source_error} (the {len(result.names)} keyframes before it were used)")
     return 0

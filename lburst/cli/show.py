@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from lburst.cli.extract import burst_name
 from lburst.cli.numbers import integer
 from lburst.io import BurstError, load_burst
 from lburst.model.extractor import LBurst
-from lburst.model.network import CheckpointError
 from lburst.viz import plot_keypoints_and_maps
 
 
@@ -64,12 +62,8 @@ def load_recording_burst(args: argparse.Namespace):
 
 
 def main(args: argparse.Namespace) -> int:
-    try:
-        model = load_model(args.weights, args.frame_order, args.device)
-        burst = load_recording_burst(args) if _is_recording(args) else load_burst(args.burst)
-    except (CheckpointError, BurstError, FileNotFoundError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    model = load_model(args.weights, args.frame_order, args.device)
+    burst = load_recording_burst(args) if _is_recording(args) else load_burst(args.burst)
     features = model.extract(burst, top_k=args.top_k)
     dense = model.dense(burst)
     out = args.out or Path(f"{burst_name(args.burst)}_keypoints.png")

@@ -6,10 +6,10 @@ so ``--bursts`` is refused with it)."""
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
+from lburst.errors import LBurstValueError
 from lburst.scenes import flight_recording as recording
 from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
 
@@ -133,40 +133,31 @@ def main(args: argparse.Namespace) -> int:
     try:
         width, height = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
-        print(f"error: --size must be WIDTHxHEIGHT, got {args.size!r}", file=sys.stderr)
-        return 2
+        raise LBurstValueError(f"--size must be WIDTHxHEIGHT, got {args.size!r}") from None
     if args.out is not None and args.out_dir is not None and args.out != args.out_dir:
-        print(f"error: two scene folders given: {args.out_dir} and --out {args.out}", file=sys.stderr)
-        return 2
+        raise LBurstValueError(f"two scene folders given: {args.out_dir} and --out {args.out}")
     args.out = args.out or args.out_dir
     if args.out is None and args.video is None and args.dng is None and args.png is None:
-        print("error: give a scene folder OUT, --video FILE.mp4, --dng FOLDER or --png FOLDER", file=sys.stderr)
-        return 2
+        raise LBurstValueError("give a scene folder OUT, --video FILE.mp4, --dng FOLDER or --png FOLDER")
     conflict = survey_conflict(args)
     if conflict:
-        print(f"error: {conflict}", file=sys.stderr)
-        return 2
-    try:
-        cfg = flight_config(args, width, height)
-        if args.out is not None:
-            ref = make_night_flight(args.out, cfg)
-            path = f"a survey of {cfg.survey_lines} lines, " if cfg.survey_lines else ""
-            print(
-                f"{args.out}: {path}{cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, "
-                f"trajectory {ref.length:.1f} m"
-            )
-        if args.video is not None or args.dng is not None or args.png is not None:
-            frames = f"{recording.frame_count(cfg)} frames at {recording.fps(cfg):g} fps, {width}x{height}"
-            if args.video is not None:
-                recording.write_flight_video(args.video, cfg, crf=args.crf)
-                print(f"{args.video}: {frames}; ground truth {recording.ground_truth_path(args.video)}")
-            if args.dng is not None:
-                recording.write_flight_dng(args.dng, cfg)
-                print(f"{args.dng}: {frames} (DNG); ground truth {recording.ground_truth_path(args.dng)}")
-            if args.png is not None:
-                recording.write_flight_png(args.png, cfg)
-                print(f"{args.png}: {frames} (PNG); ground truth {recording.ground_truth_path(args.png)}")
-    except (ValueError, OSError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        raise LBurstValueError(conflict)
+    cfg = flight_config(args, width, height)
+    if args.out is not None:
+        ref = make_night_flight(args.out, cfg)
+        path = f"a survey of {cfg.survey_lines} lines, " if cfg.survey_lines else ""
+        print(
+            f"{args.out}: {path}{cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, trajectory {ref.length:.1f} m"
+        )
+    if args.video is not None or args.dng is not None or args.png is not None:
+        frames = f"{recording.frame_count(cfg)} frames at {recording.fps(cfg):g} fps, {width}x{height}"
+        if args.video is not None:
+            recording.write_flight_video(args.video, cfg, crf=args.crf)
+            print(f"{args.video}: {frames}; ground truth {recording.ground_truth_path(args.video)}")
+        if args.dng is not None:
+            recording.write_flight_dng(args.dng, cfg)
+            print(f"{args.dng}: {frames} (DNG); ground truth {recording.ground_truth_path(args.dng)}")
+        if args.png is not None:
+            recording.write_flight_png(args.png, cfg)
+            print(f"{args.png}: {frames} (PNG); ground truth {recording.ground_truth_path(args.png)}")
     return 0

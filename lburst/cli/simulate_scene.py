@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
+from lburst.errors import RunFailed
 from lburst.scenes.photo_scene import REFERENCE_SOURCE, simulate_scene
-from lburst.sfm.scene import SceneError, list_scene
+from lburst.sfm.scene import list_scene
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -52,29 +52,19 @@ def reference_options(args: argparse.Namespace) -> dict:
 
 
 def main(args: argparse.Namespace) -> int:
-    from lburst.sfm.reconstruct import ReconstructionError
-
-    try:
-        ref = simulate_scene(
-            args.photos,
-            args.out,
-            args.frames,
-            args.motion_px,
-            args.noise,
-            args.seed,
-            reference=not args.no_reference,
-            reference_options=reference_options(args),
-        )
-    except (SceneError, ReconstructionError, ValueError) as err:
-        print(f"lburst simulate scene: {err}", file=sys.stderr)
-        return 1
+    ref = simulate_scene(
+        args.photos,
+        args.out,
+        args.frames,
+        args.motion_px,
+        args.noise,
+        args.seed,
+        reference=not args.no_reference,
+        reference_options=reference_options(args),
+    )
     if not args.no_reference:
         if ref is None:
-            print(
-                f"lburst simulate scene: the clean photos did not reconstruct; {args.out} has no reference",
-                file=sys.stderr,
-            )
-            return 1
+            raise RunFailed(f"the clean photos did not reconstruct; {args.out} has no reference")
         total = len([i for i in list_scene(args.photos).items if i.kind == "image"])
         print(
             f"reference: {len(ref.poses)}/{total} photos registered ({REFERENCE_SOURCE}) "

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from lburst.bench.validation import make_validation_sequences
@@ -33,11 +32,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     from lburst.train.data import list_photos
 
-    try:
-        photos = list_photos(args.photos or [args._default_photos], split=args.split)
-        folders = make_validation_sequences(photos, args.out, args.seed)
-    except (FileNotFoundError, ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    photos = list_photos(args.photos or [args._default_photos], split=args.split)
+    folders = make_validation_sequences(photos, args.out, args.seed)
     print(f"{len(folders)} sequences in {args.out}")
     return 0

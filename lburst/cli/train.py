@@ -10,6 +10,7 @@ from dataclasses import fields, replace
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
+from lburst.errors import LBurstValueError
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.paths import shared_dir
 from lburst.train.loop import PRESETS, TrainConfig, check_resume_options, saved_run_length, train
@@ -153,7 +154,7 @@ def _check_resumed_pairs(out: Path, max_rotation: float | None) -> None:
     except (OSError, ValueError, KeyError, TypeError):
         return
     if max_rotation is not None and max_rotation != saved:
-        raise ValueError(
+        raise LBurstValueError(
             f"{out}: a resumed run keeps its own settings; leave out --max-rotation {max_rotation:g} (the run has {saved:g})"
         )
 

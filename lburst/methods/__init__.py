@@ -31,8 +31,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from lburst.errors import LBurstValueError
 from lburst.features import Extractor
-from lburst.methods.options import parse_options
+from lburst.methods.options import parse_options, parse_pairs
 
 __all__ = [
     "Extractor",
@@ -138,18 +139,10 @@ def _split(head: str, spec: str) -> tuple[str, str | None, dict[str, str]]:
     while colon and pairs and not _OPTION.match(pairs[0]):  # a comma inside the checkpoint path
         arg += "," + pairs.pop(0)
     if colon and not arg.strip():
-        raise ValueError(
+        raise LBurstValueError(
             f"method spec {spec!r}: nothing after {name.strip() + ':'!r} (a checkpoint file or a shipped name)"
         )
-    options = {}
-    for pair in pairs:
-        key, eq, value = pair.partition("=")
-        if not eq or not key.strip():
-            raise ValueError(f"bad option {pair!r} in method spec {spec!r}: expected KEY=VALUE")
-        if key.strip() in options:
-            raise ValueError(f"option {key.strip()!r} given twice in method spec {spec!r}")
-        options[key.strip()] = value.strip()
-    return name.strip(), (arg or None), options
+    return name.strip(), (arg or None), parse_pairs(pairs, spec)
 
 
 def method_slug(spec: str) -> str:
@@ -162,7 +155,7 @@ def method_slug(spec: str) -> str:
 def parse_spec(spec: str) -> Spec:
     """Parse ``NAME[:ARG][,KEY=VALUE...]`` or ``WRAPPER[,KEY=VALUE...]+SPEC`` (module docstring)."""
     if not isinstance(spec, str):
-        raise ValueError(f"a method spec is a string such as 'lburst' or 'merge+sift', got {spec!r}")
+        raise LBurstValueError(f"a method spec is a string such as 'lburst' or 'merge+sift', got {spec!r}")
     _load_providers()
     head, plus, rest = spec.partition("+")
     if plus:
@@ -170,7 +163,7 @@ def parse_spec(spec: str) -> Spec:
         info = _METHODS.get(name)
         if info is not None and info.wraps:
             if arg is not None:
-                raise ValueError(f"method {name!r} takes no argument, got {arg!r} in {spec!r}")
+                raise LBurstValueError(f"method {name!r} takes no argument, got {arg!r} in {spec!r}")
             return Spec(spec, name, None, options, parse_spec(rest))
     name, arg, options = _split(spec, spec)
     return Spec(spec, name, arg, options)
@@ -178,7 +171,7 @@ def parse_spec(spec: str) -> Spec:
 
 def _info(name: str, spec: str) -> MethodInfo:
     if name not in _METHODS:
-        raise ValueError(f"unknown method {name!r} in {spec!r}; available: {', '.join(available())}")
+        raise LBurstValueError(f"unknown method {name!r} in {spec!r}; available: {', '.join(available())}")
     return _METHODS[name]
 
 
@@ -209,7 +202,7 @@ def _build(spec: Spec, runtime: dict[str, Any]) -> Extractor:
         extractor = info.factory(inner, parse_options(info.options, spec.options, spec.name))
     else:
         if spec.arg is not None and info.arg is None:
-            raise ValueError(f"method {spec.name!r} takes no argument, got {spec.arg!r}")
+            raise LBurstValueError(f"method {spec.name!r} takes no argument, got {spec.arg!r}")
         extractor = info.factory(spec.arg, parse_options(info.options, {**spec.options, **runtime}, spec.name))
     extractor.name = spec.text
     return extractor

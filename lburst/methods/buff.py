@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.features import Features, empty_features, image_size, select
 from lburst.frames import gray_unit, time_offsets
 from lburst.methods import register, sift_describe
@@ -89,12 +90,12 @@ class BuffConfig:
     def slope_grid(self) -> tuple[np.ndarray, tuple[int, ...]]:
         """Slopes ``(S, 2)`` (u, v) px/frame and the grid's shape (``(n,)`` 1-D, ``(nv, nu)`` 2-D, u fastest)."""
         if self.slope_step <= 0 or self.slope_max < self.slope_min:
-            raise ValueError(f"bad slope range {self.slope_min}..{self.slope_max} step {self.slope_step}")
+            raise LBurstValueError(f"bad slope range {self.slope_min}..{self.slope_max} step {self.slope_step}")
         values = np.arange(self.slope_min, self.slope_max + 1e-6 * self.slope_step, self.slope_step)
         if self.direction is not None:
             d = np.asarray(self.direction, np.float64)
             if d.shape != (2,) or not np.linalg.norm(d) > 0:
-                raise ValueError(f"direction must be a non-zero (dx, dy), got {self.direction}")
+                raise LBurstValueError(f"direction must be a non-zero (dx, dy), got {self.direction}")
             return (values[:, None] * (d / np.linalg.norm(d))[None]).astype(np.float64), (len(values),)
         v, u = np.meshgrid(values, values, indexing="ij")
         return np.stack([u.ravel(), v.ravel()], 1), (len(values), len(values))

@@ -8,6 +8,7 @@ from typing import Literal
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.features import Features
 from lburst.methods import register
 from lburst.model.extractor import ROTATIONS, LBurst, MultiScaleConfig
@@ -68,14 +69,16 @@ class LearnedOptions:
     def __post_init__(self) -> None:
         autocast_dtype(self.precision)  # a clear error for an unknown precision
         if isinstance(self.spread, bool) or not isinstance(self.spread, int) or not 0 <= self.spread <= 64:
-            raise ValueError(f"spread must be an integer 0-64 (cells per side; 0: plain top-k), got {self.spread!r}")
+            raise LBurstValueError(
+                f"spread must be an integer 0-64 (cells per side; 0: plain top-k), got {self.spread!r}"
+            )
         if self.rotations not in ROTATIONS:
-            raise ValueError(
+            raise LBurstValueError(
                 f"rotations must be one of {', '.join(map(str, ROTATIONS))} (views turned by 0; 0 and 180; "
                 f"every 90; every 45 degrees), got {self.rotations!r}"
             )
         if self.runtime is not None and self.runtime != "auto" and self.runtime not in RUNTIMES:
-            raise ValueError(f"unknown runtime {self.runtime!r}: use auto or one of {', '.join(RUNTIMES)}")
+            raise LBurstValueError(f"unknown runtime {self.runtime!r}: use auto or one of {', '.join(RUNTIMES)}")
 
     def multiscale(self) -> dict:
         """The :class:`MultiScaleConfig` fields, for :meth:`LBurst.extract`."""

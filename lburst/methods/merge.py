@@ -17,6 +17,7 @@ from typing import Literal
 import numpy as np
 
 from lburst.align import Method, Motion, align_burst, estimate_shifts, warp_frame
+from lburst.errors import LBurstValueError
 from lburst.features import Extractor, Features
 from lburst.frames import check_burst, dtype_max
 from lburst.methods import register
@@ -59,9 +60,9 @@ def merge_burst(
         shifts = estimate_shifts(burst, method=method, motion=motion)
     shifts = np.asarray(shifts, np.float64)
     if shifts.shape != (n, 2):
-        raise ValueError(f"shifts must be ({n}, 2) for a {n}-frame burst, got {shifts.shape}")
+        raise LBurstValueError(f"shifts must be ({n}, 2) for a {n}-frame burst, got {shifts.shape}")
     if reduce not in ("mean", "median"):
-        raise ValueError(f"unknown reduction {reduce!r}: use 'mean' or 'median'")
+        raise LBurstValueError(f"unknown reduction {reduce!r}: use 'mean' or 'median'")
     warped = np.stack([warp_frame(burst[k], shifts[k]) for k in range(n)])
     valid = np.stack([valid_mask((h, w), shifts[k]) for k in range(n)])
     none = ~valid.any(0)

@@ -7,6 +7,8 @@ import types
 import typing
 from typing import Any
 
+from lburst.errors import LBurstValueError
+
 
 def as_bool(value: str | bool) -> bool:
     """``'1'/'true'/'yes'`` -> True, ``'0'/'false'/'no'`` -> False (case-insensitive)."""
@@ -16,7 +18,7 @@ def as_bool(value: str | bool) -> bool:
         return True
     if str(value).lower() in ("0", "false", "no"):
         return False
-    raise ValueError(f"expected a boolean, got {value!r}")
+    raise LBurstValueError(f"expected a boolean, got {value!r}")
 
 
 def as_floats(value: str | tuple | list, count: int | None = None) -> tuple[float, ...]:
@@ -27,7 +29,7 @@ def as_floats(value: str | tuple | list, count: int | None = None) -> tuple[floa
     else:
         values = tuple(float(v) for v in value)
     if count is not None and len(values) != count:
-        raise ValueError(f"expected {count} numbers, got {value!r}")
+        raise LBurstValueError(f"expected {count} numbers, got {value!r}")
     return values
 
 
@@ -35,7 +37,7 @@ def check_known(options: dict, known: set[str], method: str) -> None:
     """Raise ``ValueError`` naming any option not in ``known``."""
     unknown = set(options) - known
     if unknown:
-        raise ValueError(f"unknown options {sorted(unknown)} for method {method!r}; known: {sorted(known)}")
+        raise LBurstValueError(f"unknown options {sorted(unknown)} for method {method!r}; known: {sorted(known)}")
 
 
 # --- typed method options -------------------------------------------------------------
@@ -57,31 +59,31 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
                 return _convert(value, arg, where)
             except ValueError as exc:
                 errors.append(str(exc))
-        raise ValueError(errors[0] if errors else f"{where}: bad value {value!r}")
+        raise LBurstValueError(errors[0] if errors else f"{where}: bad value {value!r}")
     if origin is typing.Literal:
         if value not in args:
-            raise ValueError(f"{where}: expected one of {', '.join(map(str, args))}, got {value!r}")
+            raise LBurstValueError(f"{where}: expected one of {', '.join(map(str, args))}, got {value!r}")
         return value
     if origin is tuple:
         count = None if (len(args) == 2 and args[1] is Ellipsis) else len(args)
         try:
             return as_floats(value, count)
         except ValueError as exc:
-            raise ValueError(f"{where}: {exc} (write a:b)") from None
+            raise LBurstValueError(f"{where}: {exc} (write a:b)") from None
     if tp is bool:
         try:
             return as_bool(value)
         except ValueError:
-            raise ValueError(f"{where}: expected a boolean (true or false), got {value!r}") from None
+            raise LBurstValueError(f"{where}: expected a boolean (true or false), got {value!r}") from None
     if tp in (int, float):
         if isinstance(value, bool):
-            raise ValueError(f"{where}: expected {tp.__name__}, got {value!r}")
+            raise LBurstValueError(f"{where}: expected {tp.__name__}, got {value!r}")
         try:
             out = tp(value)
         except (TypeError, ValueError):
-            raise ValueError(f"{where}: expected {tp.__name__}, got {value!r}") from None
+            raise LBurstValueError(f"{where}: expected {tp.__name__}, got {value!r}") from None
         if tp is int and isinstance(value, float) and out != value:
-            raise ValueError(f"{where}: expected int, got {value!r}")
+            raise LBurstValueError(f"{where}: expected int, got {value!r}")
         return out
     if tp is str:
         return str(value)
@@ -126,6 +128,21 @@ def describe_options(cls: type | None) -> str:
     return ", ".join(f"{n}: {t} = {format_default(d)}" for n, t, d in table) if table else "none"
 
 
+def parse_pairs(pairs: list[str], spec: str, kind: str = "method") -> dict[str, str]:
+    """The ``KEY=VALUE`` items of a method or matcher spec (``pairs``: the spec split at its
+    commas, after the name) as strings by key; ``LBurstValueError`` for an item without ``=``
+    or a key given twice.  The one parser of spec options, for methods and matchers alike."""
+    options: dict[str, str] = {}
+    for pair in pairs:
+        key, eq, value = pair.partition("=")
+        if not eq or not key.strip():
+            raise LBurstValueError(f"bad option {pair!r} in {kind} spec {spec!r}: expected KEY=VALUE")
+        if key.strip() in options:
+            raise LBurstValueError(f"option {key.strip()!r} given twice in {kind} spec {spec!r}")
+        options[key.strip()] = value.strip()
+    return options
+
+
 def parse_options(cls: type | None, given: dict[str, Any], method: str, kind: str = "method") -> Any:
     """An instance of the options dataclass ``cls`` from ``given`` (strings or values).
 
@@ -134,20 +151,22 @@ def parse_options(cls: type | None, given: dict[str, Any], method: str, kind: st
     """
     if cls is None:
         if given:
-            raise ValueError(f"{kind} {method!r} takes no options, got {', '.join(sorted(given))}")
+            raise LBurstValueError(f"{kind} {method!r} takes no options, got {', '.join(sorted(given))}")
         return None
     hints = typing.get_type_hints(cls)
     names = [f.name for f in dataclasses.fields(cls)]
     unknown = sorted(set(given) - set(names))
     if unknown:
-        raise ValueError(f"unknown options for {kind} {method!r}: {', '.join(unknown)}; valid: {describe_options(cls)}")
+        raise LBurstValueError(
+            f"unknown options for {kind} {method!r}: {', '.join(unknown)}; valid: {describe_options(cls)}"
+        )
     values = {}
     for key, value in given.items():
         try:
             values[key] = _convert(value, hints[key], f"option {key} of {kind} {method!r}")
         except ValueError as exc:
-            raise ValueError(f"{exc}; valid: {describe_options(cls)}") from None
+            raise LBurstValueError(f"{exc}; valid: {describe_options(cls)}") from None
     try:
         return cls(**values)
     except ValueError as exc:  # checks in __post_init__
-        raise ValueError(f"{kind} {method!r}: {exc}") from None
+        raise LBurstValueError(f"{kind} {method!r}: {exc}") from None

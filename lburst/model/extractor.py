@@ -22,6 +22,7 @@ import torch
 import torch.nn.functional as F
 
 from lburst.align import align_burst
+from lburst.errors import LBurstValueError
 from lburst.features import Features, concatenate, image_size, select
 from lburst.model.fast import FastLBurstNet, descriptor_stride, descriptors_at
 from lburst.model.lite import LiteNet
@@ -81,11 +82,11 @@ class MultiScaleConfig:
         for name in ("min_size", "max_size"):
             value = getattr(self, name)
             if not _is_int(value) or value < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+                raise LBurstValueError(f"{name} must be an integer >= 1, got {value!r}")
         if self.max_size < self.min_size:
-            raise ValueError(f"max_size {self.max_size} is below min_size {self.min_size}")
+            raise LBurstValueError(f"max_size {self.max_size} is below min_size {self.min_size}")
         if not _is_real(self.scale_factor) or not 1 < self.scale_factor < float("inf"):
-            raise ValueError(
+            raise LBurstValueError(
                 f"scale_factor must be a number > 1 (the ratio of consecutive levels), got {self.scale_factor!r}"
             )
         if not (
@@ -95,23 +96,23 @@ class MultiScaleConfig:
             and self.max_scale > 0
             and self.max_scale < float("inf")
         ):
-            raise ValueError(
+            raise LBurstValueError(
                 f"scales must satisfy 0 <= min_scale <= max_scale, max_scale > 0; "
                 f"got {self.min_scale!r}, {self.max_scale!r}"
             )
         for name in ("rel_thr", "rep_thr"):
             value = getattr(self, name)
             if not _is_real(value) or not 0 <= value <= 1:
-                raise ValueError(f"{name} must be in [0, 1], got {value!r}")
+                raise LBurstValueError(f"{name} must be in [0, 1], got {value!r}")
         if self.top_k is not None and (not _is_int(self.top_k) or self.top_k < 0):
-            raise ValueError(f"top_k must be an integer >= 0 or None, got {self.top_k!r}")
+            raise LBurstValueError(f"top_k must be an integer >= 0 or None, got {self.top_k!r}")
         for name in ("published_coordinates", "fast", "whiten"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+                raise LBurstValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         autocast_dtype(self.precision)
         levels = 1 + math.log(self.max_size / self.min_size) / math.log(self.scale_factor)
         if levels > MAX_LEVELS:
-            raise ValueError(
+            raise LBurstValueError(
                 f"scale_factor {self.scale_factor} between max_size {self.max_size} and min_size "
                 f"{self.min_size} makes {levels:.0f} pyramid levels (at most {MAX_LEVELS})"
             )
@@ -145,7 +146,7 @@ def frame_permutation(n: int, order: str) -> list[int]:
     if order == "published":
         h = n // 2
         return [h - k for k in range(1, h + 1)] + list(range(h, n))
-    raise ValueError(f"unknown frame order {order!r}: use 'temporal' or 'published'")
+    raise LBurstValueError(f"unknown frame order {order!r}: use 'temporal' or 'published'")
 
 
 def _local_maxima(rep: torch.Tensor, rel: torch.Tensor, cfg: MultiScaleConfig) -> tuple[torch.Tensor, torch.Tensor]:
@@ -193,7 +194,7 @@ def _integer_frames(x: torch.Tensor) -> torch.Tensor:
     values = x.float()
     finite = torch.isfinite(values)
     if not finite.all():
-        raise ValueError(f"the burst tensor holds {int((~finite).sum())} NaN or infinite values")
+        raise LBurstValueError(f"the burst tensor holds {int((~finite).sum())} NaN or infinite values")
     check_float_burst(np.array([values.min().item(), values.max().item()]))
     values = values.clamp(0, 1)
     eight = torch.round(values * 255)
@@ -215,14 +216,14 @@ def burst_from_tensor(x: torch.Tensor) -> np.ndarray:
         hint = hint or (
             " (gray: repeat the channel, x.expand(-1, 3, -1, -1))" if x.ndim == 4 and x.shape[1] == 1 else ""
         )
-        raise ValueError(
+        raise LBurstValueError(
             f"a burst tensor must be (N, 3, H, W), (3, H, W) or a batch (B, N, 3, H, W), got {tuple(x.shape)}{hint}"
         )
     x = x.detach()
     if x.dtype in _INTEGER_TENSORS:
         return _channels_last(x)
     if not x.is_floating_point():
-        raise ValueError(f"a burst tensor must be uint8 or float in [0, 1], got {x.dtype}")
+        raise LBurstValueError(f"a burst tensor must be uint8 or float in [0, 1], got {x.dtype}")
     frames = _integer_frames(x)
     array = _channels_last(frames)
     return array if frames.dtype == torch.uint8 else array.astype(np.uint16)
@@ -273,7 +274,7 @@ class LBurst:
         descriptors are returned as ``normalize(W (d - mean))`` (``W`` the identity when not
         given)."""
         if net is None and runner is None:
-            raise ValueError("give a network or a runner")
+            raise LBurstValueError("give a network or a runner")
         self._device = check_device(device)
         self.net = net.eval().to(self.device) if net is not None else None
         self.frames = net.config.frames if net is not None else int(frames)
@@ -285,16 +286,16 @@ class LBurst:
         self._reduced: dict[str, FastLBurstNet] = {}
         self.descriptor_mean = self.descriptor_whitening = None
         if descriptor_whitening is not None and descriptor_mean is None:
-            raise ValueError("descriptor_whitening needs descriptor_mean")
+            raise LBurstValueError("descriptor_whitening needs descriptor_mean")
         if descriptor_mean is not None:
             mean = torch.as_tensor(np.asarray(descriptor_mean, np.float32))
             if mean.ndim != 1 or not torch.isfinite(mean).all():
-                raise ValueError(f"descriptor_mean must be a finite (D,) vector, got shape {tuple(mean.shape)}")
+                raise LBurstValueError(f"descriptor_mean must be a finite (D,) vector, got shape {tuple(mean.shape)}")
             self.descriptor_mean = mean.to(self.device)
         if descriptor_whitening is not None:
             matrix = torch.as_tensor(np.asarray(descriptor_whitening, np.float32))
             if matrix.shape != (len(self.descriptor_mean),) * 2 or not torch.isfinite(matrix).all():
-                raise ValueError(
+                raise LBurstValueError(
                     f"descriptor_whitening must be a finite ({len(self.descriptor_mean)}, "
                     f"{len(self.descriptor_mean)}) matrix, got shape {tuple(matrix.shape)}"
                 )
@@ -311,10 +312,12 @@ class LBurst:
         module.  ``ValueError`` for a device that is not there, and for any device but the CPU
         when the network runs on a runtime other than torch (ONNX Runtime, OpenVINO)."""
         if not isinstance(device, (str, torch.device)):
-            raise ValueError(f"LBurst.to takes a device (a str or torch.device), got {device!r}")
+            raise LBurstValueError(f"LBurst.to takes a device (a str or torch.device), got {device!r}")
         movable = self._runner is None or isinstance(self._runner, torch.nn.Module)
         if not movable and str(device).split(":")[0] != "cpu":
-            raise ValueError(f"runtime {self.runtime!r} runs on the CPU only; load the weights with runtime='torch'")
+            raise LBurstValueError(
+                f"runtime {self.runtime!r} runs on the CPU only; load the weights with runtime='torch'"
+            )
         device = check_device(device)
         for module in (self.net, self._runner, *self._reduced.values()):
             if isinstance(module, torch.nn.Module):
@@ -329,7 +332,7 @@ class LBurst:
     def check_whitening(self) -> None:
         """``ValueError`` unless the weights carry a descriptor whitening."""
         if self.descriptor_mean is None:
-            raise ValueError("these weights carry no descriptor whitening; add it with `lburst export whitened`")
+            raise LBurstValueError("these weights carry no descriptor whitening; add it with `lburst export whitened`")
 
     def _whiten(self, desc: torch.Tensor, dim: int) -> torch.Tensor:
         """``normalize(W (desc - mean))`` along ``dim`` (``W`` the identity without a matrix)."""
@@ -409,7 +412,7 @@ class LBurst:
         if runtime == "auto":
             runtime = choose_runtime(threads=threads) if device.type == "cpu" else "torch"
         if runtime != "torch" and device.type != "cpu":
-            raise ValueError(f"runtime {runtime!r} runs on the CPU only; on {device.type} use 'torch'")
+            raise LBurstValueError(f"runtime {runtime!r} runs on the CPU only; on {device.type} use 'torch'")
         runner = None if runtime == "torch" else make_runner(runtime, net, threads=threads, meta=meta)
         model = cls(
             net,
@@ -445,16 +448,16 @@ class LBurst:
         if burst.ndim == 3:  # a single image
             burst = burst[None]
         if burst.ndim != 4 or burst.shape[-1] != 3:
-            raise ValueError(f"expected a burst (N, H, W, 3) or an image (H, W, 3), got shape {burst.shape}")
+            raise LBurstValueError(f"expected a burst (N, H, W, 3) or an image (H, W, 3), got shape {burst.shape}")
         n = burst.shape[0]
         if n != self.frames:
             if self.frames == 1 and n % 2 == 1:
                 burst = burst[n // 2 : n // 2 + 1]  # single-image net: the common frame
             else:
-                raise ValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
+                raise LBurstValueError(f"this network takes {self.frames}-frame bursts, got {n} frames")
         if min(burst.shape[1:3]) < MIN_SIDE:  # before any stage, the alignment included
             h, w = burst.shape[1:3]
-            raise ValueError(f"a {w}x{h} image is too small for features (at least {MIN_SIDE} px a side)")
+            raise LBurstValueError(f"a {w}x{h} image is too small for features (at least {MIN_SIDE} px a side)")
         if self.align and n == self.frames and burst.dtype in (np.uint8, np.uint16):
             burst = align_burst(burst)
         burst, scale = self._reduce(burst, cfg) if cfg is not None else (burst, 1.0)
@@ -509,7 +512,7 @@ class LBurst:
         height, width = self._full_size(burst)
         need, limit = dense_bytes(height, width, self.descriptor_dim), memory_limit_bytes()
         if limit is not None and need > limit:
-            raise ValueError(
+            raise LBurstValueError(
                 f"dense maps of a {width}x{height} burst need about {need / 2**30:.1f} GiB, more than half of "
                 f"this machine's memory ({limit / 2**30:.1f} GiB): use extract(), or resize the burst"
             )
@@ -574,7 +577,7 @@ class LBurst:
         from lburst.rotation import map_points, rotate_image, rotation_map, turn_burst
 
         if rotations not in ROTATIONS:
-            raise ValueError(f"rotations must be one of {ROTATIONS}, got {rotations!r}")
+            raise LBurstValueError(f"rotations must be one of {ROTATIONS}, got {rotations!r}")
         burst = np.asarray(burst)
         height, width = burst.shape[1:3]
         parts = []
@@ -611,7 +614,7 @@ class LBurst:
             return []
         sizes = {self._full_size(burst) for burst in bursts}
         if len(sizes) > 1:
-            raise ValueError(f"extract_batch takes bursts of one size, got {sorted(sizes)}")
+            raise LBurstValueError(f"extract_batch takes bursts of one size, got {sorted(sizes)}")
         inputs = [self._input(burst, cfg) for burst in bursts]
         x = torch.cat([x for x, _ in inputs])
         found = self._extract(x, cfg, sizes.pop(), inputs[0][1])
@@ -634,7 +637,9 @@ class LBurst:
         scale ``start`` of their ``full_size`` (H, W) (default: ``x`` is at full size)."""
         height, width = full_size or x.shape[-2:]
         if min(height, width) < MIN_SIDE:
-            raise ValueError(f"a {width}x{height} image is too small for features (at least {MIN_SIDE} px a side)")
+            raise LBurstValueError(
+                f"a {width}x{height} image is too small for features (at least {MIN_SIDE} px a side)"
+            )
         if cfg.fast and self._torch_levels(cfg.precision):  # channels-last once: each level is resized in it
             x = x.contiguous(memory_format=torch.channels_last)
         batch = x.shape[0]
@@ -674,7 +679,7 @@ class LBurst:
                 size = (round(height * s), round(width * s))
                 x = F.interpolate(x, size, mode="bilinear", align_corners=False)
         if not found[0]:
-            raise ValueError(
+            raise LBurstValueError(
                 f"no pyramid level between max_size {cfg.max_size} and min_size {cfg.min_size} "
                 f"for a {width}x{height} image"
             )

@@ -24,6 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lburst.errors import LBurstValueError
 from lburst.model.network import LBurstNet, autocast_dtype
 
 
@@ -81,7 +82,7 @@ class FastLBurstNet(nn.Module):
         self._autocast = autocast_dtype(precision)
         for name, rows in (("stripe_rows", stripe_rows), ("head_band_rows", head_band_rows)):
             if rows is not None and (rows < 1 or (name == "stripe_rows" and rows % 2)):
-                raise ValueError(f"{name} must be a positive (for stripes: even) number of rows, got {rows}")
+                raise LBurstValueError(f"{name} must be a positive (for stripes: even) number of rows, got {rows}")
         self.precision = precision
         self.tiled = tiled
         self.stripe_rows = stripe_rows
@@ -91,7 +92,7 @@ class FastLBurstNet(nn.Module):
         pool = next(i for i, op in enumerate(self.body) if isinstance(op, nn.MaxPool2d))
         self.pool_index = pool  # body[:pool + 1] is striped, body[pool + 1:] runs on the whole map
         if any(c.kernel_size != (3, 3) or c.dilation != (1, 1) or c.padding != (1, 1) for c in self._front_convs()):
-            raise ValueError("striped layers must be 3x3 convs with padding 1")
+            raise LBurstValueError("striped layers must be 3x3 convs with padding 1")
         heads = torch.cat([net.sal.weight, net.clf.weight])[:, :, 0, 0]  # (3, D): sal, clf0, clf1
         self.register_buffer("head_weight", heads.detach().clone())
         self.register_buffer("head_bias", torch.cat([net.sal.bias, net.clf.bias]).detach().clone())

@@ -45,6 +45,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lburst.errors import LBurstValueError
 from lburst.model.precision import autocast_dtype
 
 #: Class name written into checkpoints of the light network.
@@ -71,12 +72,12 @@ class LiteConfig:
 
     def __post_init__(self) -> None:
         if self.frames < 1 or self.frames % 2 == 0:
-            raise ValueError(f"frames must be odd and positive, got {self.frames}")
+            raise LBurstValueError(f"frames must be odd and positive, got {self.frames}")
         for name in ("dim", "fine", "coarse"):
             if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+                raise LBurstValueError(f"{name} must be positive, got {getattr(self, name)}")
         if not self.dilations or any(d < 1 for d in self.dilations):
-            raise ValueError(f"dilations must be positive, got {self.dilations}")
+            raise LBurstValueError(f"dilations must be positive, got {self.dilations}")
 
     @property
     def in_channels(self) -> int:
@@ -92,7 +93,7 @@ class LiteConfig:
         """Parse :meth:`net_string` (never evaluated); ``ValueError`` on anything else."""
         match = re.fullmatch(rf"{LITE_NAME}\(([^()]*)\)", net.strip())
         if not match:
-            raise ValueError(f"not a {LITE_NAME} network string: {net!r}")
+            raise LBurstValueError(f"not a {LITE_NAME} network string: {net!r}")
         values: dict[str, str] = {}
         for item in filter(None, (s.strip() for s in match.group(1).split(","))):
             key, _, value = item.partition("=")
@@ -100,16 +101,16 @@ class LiteConfig:
         known = {f.name for f in fields(cls)} | {"inchan"}
         unknown = set(values) - known
         if unknown:
-            raise ValueError(f"{net!r}: unknown fields {', '.join(sorted(unknown))}")
+            raise LBurstValueError(f"{net!r}: unknown fields {', '.join(sorted(unknown))}")
         try:
             inchan = int(values.pop("inchan", "15"))
             kwargs: dict = {k: int(v) for k, v in values.items() if k != "dilations"}
             if "dilations" in values:
                 kwargs["dilations"] = tuple(int(d) for d in values["dilations"].split("-"))
         except ValueError as exc:
-            raise ValueError(f"{net!r}: {exc}") from exc
+            raise LBurstValueError(f"{net!r}: {exc}") from exc
         if inchan % 3:
-            raise ValueError(f"{net!r}: input channels {inchan} are not a multiple of 3")
+            raise LBurstValueError(f"{net!r}: input channels {inchan} are not a multiple of 3")
         return cls(frames=inchan // 3, **kwargs)
 
 
@@ -155,7 +156,7 @@ class LiteNet(nn.Module):
 
     def _check(self, x: torch.Tensor) -> None:
         if x.ndim != 4 or x.shape[1] != self.config.in_channels:
-            raise ValueError(
+            raise LBurstValueError(
                 f"expected input (B, {self.config.in_channels}, H, W) for a {self.config.frames}-frame "
                 f"network, got {tuple(x.shape)}"
             )

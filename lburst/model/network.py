@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lburst.errors import LBurstValueError
 from lburst.model.lite import LITE_NAME, LiteConfig, LiteNet
 from lburst.model.precision import (  # noqa: F401  (re-exported)
     AUTOCAST_DTYPES,
@@ -59,7 +60,7 @@ def training_memory_format(device: torch.device | str, name: str = "auto") -> to
         cpu_without_avx512 = torch.device(device).type == "cpu" and flags is not None and "avx512f" not in flags
         name = "contiguous" if cpu_without_avx512 else "channels_last"
     if name not in formats:
-        raise ValueError(f"memory format must be auto, channels_last or contiguous, got {name!r}")
+        raise LBurstValueError(f"memory format must be auto, channels_last or contiguous, got {name!r}")
     return formats[name]
 
 
@@ -68,14 +69,14 @@ def check_device(device: torch.device | str) -> torch.device:
     try:
         device = torch.device(device)
     except RuntimeError as exc:
-        raise ValueError(f"device {device!r}: not a torch device (use cpu or cuda)") from exc
+        raise LBurstValueError(f"device {device!r}: not a torch device (use cpu or cuda)") from exc
     if device.type == "cuda" and not torch.cuda.is_available():
         why = "this torch is built without CUDA" if torch.version.cuda is None else "no CUDA GPU is visible"
-        raise ValueError(f"device {device}: CUDA is not available ({why}); use --device cpu")
+        raise LBurstValueError(f"device {device}: CUDA is not available ({why}); use --device cpu")
     return device
 
 
-class CheckpointError(ValueError):
+class CheckpointError(LBurstValueError):
     """A checkpoint file that cannot be read or does not describe an LBurst network."""
 
 
@@ -110,7 +111,7 @@ class LBurstNet(nn.Module):
     def __init__(self, config: NetConfig = NetConfig()) -> None:
         super().__init__()
         if config.frames < 1 or config.frames % 2 == 0:
-            raise ValueError(f"frames must be odd and positive, got {config.frames}")
+            raise LBurstValueError(f"frames must be odd and positive, got {config.frames}")
         self.config = config
         m = config.mchan
         ops: list[nn.Module] = []
@@ -146,7 +147,7 @@ class LBurstNet(nn.Module):
         ``reliability_logits`` also returns the reliability's logit (class 1 minus class 0,
         ``(B, 1, H, W)``), for training (see ``TrainConfig.rel_logit_weight``)."""
         if x.ndim != 4 or x.shape[1] != self.config.in_channels:
-            raise ValueError(
+            raise LBurstValueError(
                 f"expected input (B, {self.config.in_channels}, H, W) for a {self.config.frames}-frame "
                 f"network, got {tuple(x.shape)}"
             )
@@ -180,11 +181,11 @@ def check_float_burst(burst: np.ndarray) -> None:
     (a 0..255 float burst would give no keypoints)."""
     finite = np.isfinite(burst)
     if not finite.all():
-        raise ValueError(f"the burst holds {burst.size - int(finite.sum())} NaN or infinite values")
+        raise LBurstValueError(f"the burst holds {burst.size - int(finite.sum())} NaN or infinite values")
     low, high = float(burst.min(initial=0.0)), float(burst.max(initial=0.0))
     if low < -FLOAT_TOLERANCE or high > 1 + FLOAT_TOLERANCE:
         hint = " (it looks like 0..255: divide by 255, or pass uint8)" if high > 2 else ""
-        raise ValueError(f"a float burst must be in [0, 1], this one spans [{low:g}, {high:g}]{hint}")
+        raise LBurstValueError(f"a float burst must be in [0, 1], this one spans [{low:g}, {high:g}]{hint}")
 
 
 def normalize_burst(
@@ -201,7 +202,7 @@ def normalize_burst(
     scaled in place).
     """
     if burst.ndim != 4 or burst.shape[-1] != 3:
-        raise ValueError(f"expected a burst of shape (N, H, W, 3), got {burst.shape}")
+        raise LBurstValueError(f"expected a burst of shape (N, H, W, 3), got {burst.shape}")
     if burst.dtype == np.uint8:
         scale = 1 / 255.0
     elif burst.dtype == np.uint16:
@@ -210,7 +211,7 @@ def normalize_burst(
         scale = 1.0
         check_float_burst(burst)
     else:
-        raise ValueError(f"unsupported burst dtype {burst.dtype}: use uint8, uint16 or float in [0, 1]")
+        raise LBurstValueError(f"unsupported burst dtype {burst.dtype}: use uint8, uint16 or float in [0, 1]")
     n, h, w, _ = burst.shape
     x = torch.from_numpy(np.ascontiguousarray(burst)).to(device)
     if memory_format == torch.channels_last:
@@ -305,7 +306,7 @@ def replicate_frames(net: LBurstNet, frames: int) -> LBurstNet:
     (up to float rounding): on an aligned burst it starts as "average, then the
     single-image network", and training can only teach it more than averaging."""
     if net.config.frames != 1:
-        raise ValueError(f"replicate_frames takes a single-image network, got {net.config.frames} frames")
+        raise LBurstValueError(f"replicate_frames takes a single-image network, got {net.config.frames} frames")
     wide = LBurstNet(replace(net.config, frames=frames))
     state = {k: v.clone() for k, v in net.state_dict().items()}
     first = "ops.0.weight"

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import torch
 
+from lburst.errors import LBurstValueError
+
 #: autocast dtype of each precision the network can run in (``None``: plain fp32)
 AUTOCAST_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
 
@@ -14,7 +16,7 @@ AUTOCAST_DTYPES: dict[str, torch.dtype | None] = {"fp32": None, "bf16": torch.bf
 def autocast_dtype(precision: str) -> torch.dtype | None:
     """The autocast dtype of ``precision`` (``None`` for fp32); ``ValueError`` for another name."""
     if precision not in AUTOCAST_DTYPES:
-        raise ValueError(f"precision must be fp32, bf16 or fp16, got {precision!r}")
+        raise LBurstValueError(f"precision must be fp32, bf16 or fp16, got {precision!r}")
     return AUTOCAST_DTYPES[precision]
 
 

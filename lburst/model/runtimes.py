@@ -49,7 +49,9 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 import torch
 
+from lburst.errors import LBurstFileNotFoundError, LBurstOSError, LBurstValueError
 from lburst.extras import require
+from lburst.io import IMAGE_SUFFIXES
 from lburst.model.fast import FastLBurstNet, pad_maps
 from lburst.model.lite import LiteNet
 from lburst.model.network import (
@@ -102,7 +104,7 @@ def available(runtime: str) -> bool:
     """Whether the packages ``runtime`` needs are installed (and, for ``openvino-bf16``, the CPU
     has native bf16: OpenVINO's emulated bf16 is slower than fp32)."""
     if runtime not in RUNTIME_MODULES:
-        raise ValueError(f"unknown runtime {runtime!r}: use one of {', '.join(RUNTIMES)}")
+        raise LBurstValueError(f"unknown runtime {runtime!r}: use one of {', '.join(RUNTIMES)}")
     import importlib.util
 
     if runtime == "openvino-bf16" and not native_bf16():
@@ -241,7 +243,7 @@ class OpenVinoRunner:
     ) -> None:
         ov = _ov()
         if precision not in OV_PRECISIONS:
-            raise ValueError(f"precision must be {' or '.join(OV_PRECISIONS)}, got {precision!r}")
+            raise LBurstValueError(f"precision must be {' or '.join(OV_PRECISIONS)}, got {precision!r}")
         if not isinstance(model, ov.Model):
             where = str(model) if isinstance(model, (str, Path)) else type(model).__name__
             model = openvino_model(model)
@@ -303,8 +305,6 @@ class OpenVinoRunner:
 
 # --------------------------------------------------------------------------- calibration
 
-IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".ppm"}
-
 
 def default_photo_folder() -> Path:
     """``$LBURST_SHARED/data/train`` (default ``../shared/data/train``), the training photos."""
@@ -320,12 +320,12 @@ def training_photos(folder: str | Path | None = None) -> list[Path]:
     lburst.train)."""
     folder = Path(folder) if folder is not None else default_photo_folder()
     if not folder.is_dir():
-        raise FileNotFoundError(f"{folder}: calibration photo folder not found (set LBURST_SHARED)")
+        raise LBurstFileNotFoundError(f"{folder}: calibration photo folder not found (set LBURST_SHARED)")
     photos = sorted(
         p for p in folder.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES and zlib.crc32(p.stem.encode()) % 10
     )
     if not photos:
-        raise FileNotFoundError(f"no training photos under {folder}")
+        raise LBurstFileNotFoundError(f"no training photos under {folder}")
     return photos
 
 
@@ -357,7 +357,7 @@ def calibration_bursts(
     if photos is None or isinstance(photos, (str, Path)):
         photos = training_photos(photos)
     if not len(photos):
-        raise ValueError("no calibration photos")
+        raise LBurstValueError("no calibration photos")
     out = []
     for i in range(count):
         rng = np.random.default_rng([seed, i])
@@ -367,7 +367,7 @@ def calibration_bursts(
         else:
             bgr = decode_file(item, cv2.IMREAD_COLOR)
             if bgr is None:
-                raise OSError(f"{item}: not a readable image")
+                raise LBurstOSError(f"{item}: not a readable image")
             photo = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
         target = rng.uniform(*long_side)
         scale = target / max(photo.shape[:2])
@@ -401,7 +401,7 @@ def quantize_openvino(model, calibration: Sequence[torch.Tensor], fast_bias_corr
     props = _model_props(model)
     items = [np.ascontiguousarray(x.detach().cpu().numpy(), dtype=np.float32) for x in calibration]
     if not items:
-        raise ValueError("no calibration data")
+        raise LBurstValueError("no calibration data")
     quantized = nncf.quantize(
         model,
         nncf.Dataset(items),
@@ -437,7 +437,7 @@ def quantize_onnx(onnx_path: str | Path, out: str | Path, calibration: Sequence[
 
     items = [np.ascontiguousarray(x.detach().cpu().numpy(), dtype=np.float32) for x in calibration]
     if not items:
-        raise ValueError("no calibration data")
+        raise LBurstValueError("no calibration data")
     out = Path(out)
     work = Path(tempfile.mkdtemp(prefix="lburst-quant-"))
     try:
@@ -486,7 +486,7 @@ def make_runner(
     a temporary folder by default).  ``calibration``: inputs for the int8 runtimes (default
     :func:`calibration_bursts` with ``net``'s frame count)."""
     if runtime not in RUNTIMES:
-        raise ValueError(f"unknown runtime {runtime!r}: use one of {', '.join(RUNTIMES)}")
+        raise LBurstValueError(f"unknown runtime {runtime!r}: use one of {', '.join(RUNTIMES)}")
     if runtime in ("torch", "torch-bf16"):
         return inference_form(net, "bf16" if runtime == "torch-bf16" else "fp32").eval()
     if runtime.endswith("-int8") and calibration is None:

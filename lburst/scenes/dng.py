@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.io import atomic_path
 
@@ -52,9 +53,9 @@ def write_dng(
 
     cfa = np.ascontiguousarray(cfa, dtype=np.uint16)
     if cfa.ndim != 2 or cfa.shape[0] % 2 or cfa.shape[1] % 2:
-        raise ValueError(f"a Bayer mosaic must be (H, W) with even H and W, got {cfa.shape}")
+        raise LBurstValueError(f"a Bayer mosaic must be (H, W) with even H and W, got {cfa.shape}")
     if pattern not in PATTERNS:
-        raise ValueError(f"unknown CFA pattern {pattern!r}; use one of {', '.join(PATTERNS)}")
+        raise LBurstValueError(f"unknown CFA pattern {pattern!r}; use one of {', '.join(PATTERNS)}")
     tags = [
         (50706, 1, 4, (1, 4, 0, 0), True),  # DNGVersion
         (50707, 1, 4, (1, 1, 0, 0), True),  # DNGBackwardVersion

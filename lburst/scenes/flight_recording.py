@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.io import atomic_path, write_image
 from lburst.noise import LowLightNoise, SensorNoise, noise_from_spec
@@ -117,7 +118,7 @@ def write_flight_video(path: str | Path, cfg: NightFlightConfig, crf: int = 16, 
 
     path = Path(path)
     if cfg.width % 2 or cfg.height % 2:
-        raise ValueError(f"an H.264 video needs an even size, got {cfg.width}x{cfg.height}")
+        raise LBurstValueError(f"an H.264 video needs an even size, got {cfg.width}x{cfg.height}")
     rate = Fraction(fps(cfg)).limit_denominator(1000)
     with atomic_path(path) as tmp:
         with av.open(str(tmp), mode="w", format="mp4", options={"movflags": "+faststart"}) as container:
@@ -170,7 +171,7 @@ def _frame_folder(folder: str | Path, cfg: NightFlightConfig, kind: str) -> Path
     if meta.is_file():
         old = json.loads(meta.read_text()).get("night_flight")
         if old != json.loads(json.dumps(cfg.to_dict())):
-            raise ValueError(f"{meta}: {folder} was made with another configuration; use a new folder")
+            raise LBurstValueError(f"{meta}: {folder} was made with another configuration; use a new folder")
     write_sidecars(cfg, folder, kind)
     return folder
 
@@ -181,7 +182,9 @@ def raw_frame(cfg: NightFlightConfig, radiance: np.ndarray, rng: np.random.Gener
 
     sensor = noise_from_spec(cfg.noise)
     if not isinstance(sensor, RAW_SENSORS):
-        raise ValueError(f"a DNG recording needs a sensor noise model (lowlight:... or sensor:...), got {cfg.noise!r}")
+        raise LBurstValueError(
+            f"a DNG recording needs a sensor noise model (lowlight:... or sensor:...), got {cfg.noise!r}"
+        )
     if isinstance(sensor, SensorNoise):
         return sensor.raw_dn(mosaic(radiance), rng, bayer=True).astype(np.uint16), sensor.white_level
     white = 2**sensor.adc_bits - 1
@@ -216,7 +219,9 @@ def write_flight_dng(folder: str | Path, cfg: NightFlightConfig, progress: bool 
 
     sensor = noise_from_spec(cfg.noise)
     if not isinstance(sensor, RAW_SENSORS):
-        raise ValueError(f"a DNG recording needs a sensor noise model (lowlight:... or sensor:...), got {cfg.noise!r}")
+        raise LBurstValueError(
+            f"a DNG recording needs a sensor noise model (lowlight:... or sensor:...), got {cfg.noise!r}"
+        )
     folder = _frame_folder(folder, cfg, "dng")
     todo = [j for j in range(frame_count(cfg)) if not (folder / f"frame_{j:06d}.dng").is_file()]
     if todo:

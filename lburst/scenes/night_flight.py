@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lburst.errors import LBurstValueError
 from lburst.io import atomic_path, save_burst
 from lburst.numbers import check_integer, check_real
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
@@ -99,20 +100,20 @@ class NightFlightConfig:
     def __post_init__(self) -> None:
         self._check_survey()
         if self.frames_per_burst < 1 or self.frames_per_burst % 2 == 0:
-            raise ValueError(f"frames_per_burst must be odd, got {self.frames_per_burst}")
+            raise LBurstValueError(f"frames_per_burst must be odd, got {self.frames_per_burst}")
         if self.n_bursts < 1 or self.width < 8 or self.height < 8 or self.supersample < 1:
-            raise ValueError("n_bursts >= 1, image size >= 8 and supersample >= 1 are required")
+            raise LBurstValueError("n_bursts >= 1, image size >= 8 and supersample >= 1 are required")
         if self.pitch_deg + self.vfov_deg / 2 >= 85:
-            raise ValueError(
+            raise LBurstValueError(
                 f"pitch {self.pitch_deg} deg sees the horizon; lower it below {85 - self.vfov_deg / 2:.0f}"
             )
         if self.city.max_height >= self.altitude - 2:
-            raise ValueError("buildings must stay below the flight altitude")
+            raise LBurstValueError("buildings must stay below the flight altitude")
 
     def _check_survey(self) -> None:
         """Check the survey fields and, for a survey, derive ``n_bursts`` from its path."""
         if check_integer(self.survey_lines, "survey_lines", 0) == 1:
-            raise ValueError("survey_lines must be 0 (the arc path) or >= 2 (survey lines), got 1")
+            raise LBurstValueError("survey_lines must be 0 (the arc path) or >= 2 (survey lines), got 1")
         check_real(self.line_length, "line_length", 0, low_open=True)
         check_real(self.line_spacing, "line_spacing", 0, low_open=True)
         if self.survey_lines:
@@ -222,7 +223,7 @@ def survey_line(cfg: NightFlightConfig, burst: int) -> int:
     """The survey line (0-based) that the common frame of ``burst`` lies on, or -1 when it
     is on a turn; ``ValueError`` for an arc flight."""
     if not cfg.survey_lines:
-        raise ValueError("survey_line needs a survey (survey_lines >= 2)")
+        raise LBurstValueError("survey_line needs a survey (survey_lines >= 2)")
     i, _, on_line = _survey_place(cfg, burst * cfg.burst_spacing)
     return i if on_line else -1
 
@@ -393,9 +394,9 @@ def make_night_flight(
         try:
             old = json.loads(config_path.read_text())
         except json.JSONDecodeError as err:
-            raise ValueError(f"{config_path}: not valid JSON ({err})") from err
+            raise LBurstValueError(f"{config_path}: not valid JSON ({err})") from err
         if old != json.loads(json.dumps(cfg.to_dict())):
-            raise ValueError(f"{config_path}: {out} was made with another configuration; use a new folder")
+            raise LBurstValueError(f"{config_path}: {out} was made with another configuration; use a new folder")
     else:
         with atomic_path(config_path) as tmp:
             tmp.write_text(json.dumps(cfg.to_dict(), indent=1))

@@ -11,6 +11,7 @@ import functools
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.extras import require
 
 # scikit-image sample photos (bundled with the package, no download); ``cat`` is ``chelsea``
@@ -126,7 +127,7 @@ class MipTexture:
     def __init__(self, image: np.ndarray, min_size: int = 4):
         image = np.asarray(image)
         if image.ndim != 3 or image.shape[2] != 3:
-            raise ValueError(f"texture must be (H, W, 3), got shape {image.shape}")
+            raise LBurstValueError(f"texture must be (H, W, 3), got shape {image.shape}")
         levels = [np.ascontiguousarray(np.clip(np.round(image), 0, 255).astype(np.uint8))]
         while min(levels[-1].shape[:2]) >= 2 * min_size:
             h, w = levels[-1].shape[:2]

@@ -38,6 +38,7 @@ from typing import Callable, ContextManager, Iterator
 
 import numpy as np
 
+from lburst.errors import LBurstError, LBurstValueError
 from lburst.extras import pycolmap  # imported on first use, after cv2 (see the module docstring)
 from lburst.process import folder_lock
 from lburst.sfm.join import join_models
@@ -131,7 +132,7 @@ class StageReader:
         return [line.split("\t") for line in complete.decode(errors="replace").splitlines() if line]
 
 
-class ColmapError(RuntimeError):
+class ColmapError(LBurstError, RuntimeError):
     """COLMAP failed (or aborted); the message says how, with the end of its log."""
 
 
@@ -231,7 +232,7 @@ def camera_params(model: str, width: int, height: int, focal: float) -> list[flo
         "OPENCV": [focal, focal, cx, cy, 0.0, 0.0, 0.0, 0.0],
     }
     if model not in params:
-        raise ValueError(f"unsupported camera model {model!r}; use one of {', '.join(params)}")
+        raise LBurstValueError(f"unsupported camera model {model!r}; use one of {', '.join(params)}")
     return params[model]
 
 
@@ -274,15 +275,15 @@ def write_database(
     """
     db_path = Path(db_path)
     if len(keypoints) != len(job.names) or len(pairs) != len(matches):
-        raise ValueError("one keypoint array per image and one match array per pair are needed")
+        raise LBurstValueError("one keypoint array per image and one match array per pair are needed")
     for i, kp in enumerate(keypoints):
         if kp.ndim != 2 or kp.shape[1] != 2:
-            raise ValueError(f"keypoints of {job.names[i]!r} must be (K, 2), got {kp.shape}")
+            raise LBurstValueError(f"keypoints of {job.names[i]!r} must be (K, 2), got {kp.shape}")
     for (a, b), m in zip(pairs, matches):
         if m.ndim != 2 or m.shape[1] != 2:
-            raise ValueError(f"matches of pair {a, b} must be (M, 2), got {m.shape}")
+            raise LBurstValueError(f"matches of pair {a, b} must be (M, 2), got {m.shape}")
         if len(m) and (m.min() < 0 or m[:, 0].max() >= len(keypoints[a]) or m[:, 1].max() >= len(keypoints[b])):
-            raise ValueError(f"matches of pair {job.names[a]!r}-{job.names[b]!r} index missing keypoints")
+            raise LBurstValueError(f"matches of pair {job.names[a]!r}-{job.names[b]!r} index missing keypoints")
     for suffix in ("", "-wal", "-shm"):
         Path(str(db_path) + suffix).unlink(missing_ok=True)
     image_ids: list[int] = []
@@ -409,7 +410,7 @@ def map_database(
         with _stage(stages, "mapping (global, with bundle adjustment)"):
             models = pycolmap.global_mapping(str(db_path), str(image_dir), str(work_dir), opts)
     else:
-        raise ValueError(f"unknown mapper {options.mapper!r}: expected 'incremental' or 'global'")
+        raise LBurstValueError(f"unknown mapper {options.mapper!r}: expected 'incremental' or 'global'")
     if not models:
         return None
     return max(models.values(), key=lambda rec: rec.num_reg_images())
@@ -600,19 +601,19 @@ def check_camera(camera: dict) -> None:
     try:
         model, width, height, params = camera["model"], camera["width"], camera["height"], camera["params"]
     except (KeyError, TypeError) as err:
-        raise ValueError(f"a camera needs model, width, height and params (lacks {err})") from None
+        raise LBurstValueError(f"a camera needs model, width, height and params (lacks {err})") from None
     if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (width, height)):
-        raise ValueError(f"width and height must be positive integers, got {width!r} x {height!r}")
+        raise LBurstValueError(f"width and height must be positive integers, got {width!r} x {height!r}")
     try:
         expected = len(pycolmap.Camera.create_from_model_name(0, str(model), 1.0, width, height).params)
     except Exception:
-        raise ValueError(f"unknown camera model {model!r}") from None
+        raise LBurstValueError(f"unknown camera model {model!r}") from None
     values = np.asarray(params, dtype=object)
     if values.ndim != 1 or not all(
         isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values
     ):
-        raise ValueError(f"params must be a list of finite numbers, got {params!r}")
+        raise LBurstValueError(f"params must be a list of finite numbers, got {params!r}")
     if len(values) != expected:
-        raise ValueError(f"{model} takes {expected} params, got {len(values)}")
+        raise LBurstValueError(f"{model} takes {expected} params, got {len(values)}")
     if values[0] <= 0:
-        raise ValueError(f"the focal length must be positive, got {values[0]}")
+        raise LBurstValueError(f"the focal length must be positive, got {values[0]}")

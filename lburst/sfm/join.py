@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.extras import pycolmap
 
 log = logging.getLogger(__name__)
@@ -220,7 +221,7 @@ def join_models(
     """
     models = sorted(models, key=lambda rec: rec.num_reg_images(), reverse=True)
     if not models:
-        raise ValueError("no model to join")
+        raise LBurstValueError("no model to join")
     largest, others = models[0], models[1:]
     joined = pycolmap.Reconstruction(largest)
     joins = []

@@ -1,11 +1,17 @@
-"""What a reconstruction of a recording leaves for other tools, beside COLMAP's model and PLY.
+"""What every reconstruction leaves for other tools, beside COLMAP's model and PLY.
 
-In the output folder ``OUT``:
+Every input (a scene of bursts or photos, a video, a folder of frames or DNG) leaves the
+same files in the output folder ``OUT``:
 
-- ``trajectory.tum``: the registered keyframes' camera-to-world poses in the model's
-  frame, timestamped with the keyframes' times (:mod:`lburst.tum`), so that
-  ``evo_ape tum <recording>.gt.txt OUT/trajectory.tum -as`` compares it with the
-  ground truth;
+- ``images/<name>.png``: the common frame of each burst (the frame its features describe);
+- ``keyframes.json``: the images in order with their times (a recording's keyframes: seconds
+  into the recording; a scene's bursts, which have no time: their index);
+- ``trajectory.tum``: the registered images' camera-to-world poses in the model's
+  frame, timestamped with those times (:mod:`lburst.tum`); with a reference
+  (``OUT/reference.json``: a scene's ``reference.json``, or the poses a recording's ground
+  truth gives its keyframes), ``reference.tum`` holds its poses with the same timestamps, so
+  that ``evo_ape tum OUT/reference.tum OUT/trajectory.tum -as`` compares them (for a recording
+  ``<recording>.gt.txt`` works as well), and ``result.json`` the ATE/RPE;
 - ``features.h5``, ``matches.h5``, ``pairs.txt``: hloc's layout, images named as in
   ``OUT/images`` (``<keyframe>.png``): per image ``keypoints`` (K, 2) (pixel centres at
   integers, as hloc), ``descriptors`` (D, K), ``scores``, ``image_size``; per pair
@@ -14,9 +20,9 @@ In the output folder ``OUT``:
   each match (:meth:`lburst.matching.DescriptorMatcher.match`: the similarity of the two
   descriptors in [-1, 1]; 0: unmatched);
 - ``report.md`` with ``trajectory.png`` (top-down, Sim3-aligned to the ground truth
-  when there is one) and ``registration.png`` (3D points per keyframe; grey: not
-  registered), the 3D points the first and last keyframes share (a closed loop ties them),
-  and a table of every keyframe.
+  when there is one) and ``registration.png`` (3D points per image; grey: not
+  registered), the 3D points the first and last images share (a closed loop ties them),
+  and a table of every image.
 """
 
 from __future__ import annotations
@@ -27,16 +33,58 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lburst.io import atomic_path, write_features_h5
+from lburst.io import atomic_path, to_uint8, write_features_h5, write_image
 from lburst.tum import write_tum
 
 if TYPE_CHECKING:
     from lburst.sfm.reconstruct import ReconstructionResult
 
 
+IMAGES = "images"  # OUT/images: the common frames, named as in features.h5 and COLMAP
+
+
+def write_common_frame(path: Path, burst: np.ndarray) -> Path:
+    """The common frame of ``burst`` (its middle frame, the one its features describe) as an
+    8-bit image at ``path`` (its suffix says the format), atomically; makes the folder."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        write_image(tmp, to_uint8(burst[len(burst) // 2]))
+    return path
+
+
+def write_scene_times(out: Path, scene: str, names: list[str]) -> None:
+    """``OUT/keyframes.json`` of a scene of bursts: its images in order, each timed by its index."""
+    data = {
+        "scene": scene,
+        "complete": True,
+        "keyframes": [{"name": n, "index": i, "time": float(i)} for i, n in enumerate(names)],
+    }
+    with atomic_path(out / "keyframes.json") as tmp:
+        tmp.write_text(json.dumps(data, indent=1))
+
+
 def keyframe_times(out: Path) -> dict[str, float]:
     data = json.loads((out / "keyframes.json").read_text())
     return {k["name"]: float(k["time"]) for k in data["keyframes"]}
+
+
+def write_reference_tum(result: "ReconstructionResult", times: dict[str, float], path: Path) -> Path | None:
+    """The reference poses (``OUT/reference.json``) of the scene's images as a TUM file, timed as
+    ``trajectory.tum``; ``None`` (and no file) without a reference."""
+    from lburst.sfm.reference import Reference
+
+    reference_path = Path(result.out_dir) / "reference.json"
+    if not reference_path.is_file():
+        path.unlink(missing_ok=True)
+        return None
+    poses = Reference.load(reference_path).poses
+    names = [n for n in result.names if n in poses and n in times]
+    return write_tum(
+        path,
+        [times[n] for n in names],
+        [poses[n] for n in names],
+        header=f"reference of {result.scene}: {Reference.load(reference_path).source}",
+    )
 
 
 def write_trajectory(result: "ReconstructionResult", times: dict[str, float], path: Path) -> Path:
@@ -53,14 +101,14 @@ def write_hloc(
     out: Path,
     names: list[str],
     features: list[dict],
-    shapes: list[tuple[int, int]],
     pairs: list[tuple[int, int]],
     matches: list[np.ndarray],
     scores: list[np.ndarray] | None = None,
 ) -> None:
     """hloc's ``features.h5``, ``matches.h5`` and ``pairs.txt`` (module docstring), each written
-    atomically.  ``scores[p]`` (M_p,): the scores of pair ``p``'s matches; ``None``: the
-    similarity of the matched descriptors (:func:`lburst.matching.similarity`)."""
+    atomically; each image's size is its features' ``image_size`` (W, H).  ``scores[p]`` (M_p,):
+    the scores of pair ``p``'s matches; ``None``: the similarity of the matched descriptors
+    (:func:`lburst.matching.similarity`)."""
     import h5py
 
     from lburst.matching import similarity
@@ -68,8 +116,8 @@ def write_hloc(
     files = [f"{n}.png" for n in names]
     with atomic_path(out / "features.h5") as tmp:
         tmp.unlink()  # h5py appends to an existing file; start from none
-        for file, feats, (h, w) in zip(files, features, shapes):
-            write_features_h5(tmp, file, feats, (w, h))
+        for file, feats in zip(files, features):
+            write_features_h5(tmp, file, feats)
     with atomic_path(out / "matches.h5") as tmp, h5py.File(tmp, "w") as f:
         for p, ((a, b), m) in enumerate(zip(pairs, matches)):
             m0 = np.full(len(features[a]["keypoints"]), -1, np.int32)
@@ -198,18 +246,19 @@ def write_report(result: "ReconstructionResult", times: dict[str, float], path: 
         tmp.write_text("\n".join(lines) + "\n")
 
 
-def write_recording_outputs(
+def write_outputs(
     result: "ReconstructionResult",
     features: list[dict],
-    shapes: list[tuple[int, int]],
     pairs: list[tuple[int, int]],
     matches: list[np.ndarray],
     scores: list[np.ndarray] | None = None,
 ) -> None:
-    """``trajectory.tum``, hloc's files and the report of a recording's reconstruction (module
-    docstring); ``scores``: those of the matches, as :func:`write_hloc` takes them."""
+    """``trajectory.tum`` (and ``reference.tum`` with a reference), hloc's files and the report
+    of any reconstruction (module docstring), from ``OUT/keyframes.json``'s times; ``scores``:
+    those of the matches, as :func:`write_hloc` takes them."""
     out = Path(result.out_dir)
     times = keyframe_times(out)
     write_trajectory(result, times, out / "trajectory.tum")
-    write_hloc(out, result.names, features, shapes, pairs, matches, scores)
+    write_reference_tum(result, times, out / "reference.tum")
+    write_hloc(out, result.names, features, pairs, matches, scores)
     write_report(result, times, out / "report.md")

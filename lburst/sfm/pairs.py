@@ -6,6 +6,8 @@ has ``i < j``.
 
 from __future__ import annotations
 
+from lburst.errors import LBurstValueError
+
 
 def exhaustive_pairs(n: int) -> list[tuple[int, int]]:
     """Every pair ``(i, j)``, ``i < j``, of ``n`` images: ``n (n - 1) / 2`` pairs."""
@@ -15,7 +17,7 @@ def exhaustive_pairs(n: int) -> list[tuple[int, int]]:
 def sequential_pairs(n: int, overlap: int) -> list[tuple[int, int]]:
     """Pairs of images at most ``overlap`` apart in trajectory order (``0 < j - i <= overlap``)."""
     if overlap < 1:
-        raise ValueError(f"overlap must be at least 1, got {overlap}")
+        raise LBurstValueError(f"overlap must be at least 1, got {overlap}")
     return [(i, j) for i in range(n) for j in range(i + 1, min(n, i + overlap + 1))]
 
 
@@ -25,4 +27,4 @@ def make_pairs(n: int, mode: str = "exhaustive", overlap: int = 10) -> list[tupl
         return exhaustive_pairs(n)
     if mode == "sequential":
         return sequential_pairs(n, overlap)
-    raise ValueError(f"unknown pairing {mode!r}: expected 'exhaustive' or 'sequential'")
+    raise LBurstValueError(f"unknown pairing {mode!r}: expected 'exhaustive' or 'sequential'")

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lburst.errors import LBurstValueError
+
 Pose = tuple[np.ndarray, np.ndarray]  # (R (3, 3), t (3,)) world-to-camera
 
 
@@ -46,14 +48,14 @@ def umeyama(source: np.ndarray, target: np.ndarray, with_scale: bool = True) -> 
     src = np.asarray(source, dtype=np.float64)
     dst = np.asarray(target, dtype=np.float64)
     if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3:
-        raise ValueError(f"need two (N, 3) point sets of the same size, got {src.shape} and {dst.shape}")
+        raise LBurstValueError(f"need two (N, 3) point sets of the same size, got {src.shape} and {dst.shape}")
     if len(src) < 3:
-        raise ValueError(f"a similarity alignment needs at least 3 points, got {len(src)}")
+        raise LBurstValueError(f"a similarity alignment needs at least 3 points, got {len(src)}")
     mu_src, mu_dst = src.mean(0), dst.mean(0)
     xs, xd = src - mu_src, dst - mu_dst
     var_src = (xs**2).sum() / len(src)
     if var_src <= 1e-24:
-        raise ValueError("cannot align: the source points coincide")
+        raise LBurstValueError("cannot align: the source points coincide")
     cov = xd.T @ xs / len(src)
     U, D, Vt = np.linalg.svd(cov)
     S = np.eye(3)
@@ -105,7 +107,7 @@ def trajectory_errors(
     rpe_rot_rmse_deg, rpe_rot_mean_deg, scale, num_poses`` (and ``ate_percent``).
     """
     if len(estimated) != len(reference):
-        raise ValueError(f"{len(estimated)} estimated poses but {len(reference)} reference poses")
+        raise LBurstValueError(f"{len(estimated)} estimated poses but {len(reference)} reference poses")
     est_c = np.array([camera_to_world(p)[:3, 3] for p in estimated])
     ref_T = [camera_to_world(p) for p in reference]
     ref_c = np.array([T[:3, 3] for T in ref_T])

@@ -1,7 +1,9 @@
 """``lburst reconstruct``: a scene of bursts to a 3D model with COLMAP, and its metrics.
 
 Pipeline (:func:`reconstruct_scene`): features of each burst's common frame with any
-method spec (cached in ``OUT/features/<name>.npz``, so an interrupted run resumes), the
+method spec (cached in ``OUT/features/<name>.npz`` under the store's key, :func:`lburst.store.key`,
+so an interrupted run resumes; features that ``lburst extract --out DIR`` stored for the same
+burst by the same method are taken from ``DIR``, by default ``OUT``, and not computed again), the
 common frames written as ``OUT/images/<name>.png`` for COLMAP, image pairs (exhaustive,
 or sequential with an overlap for trajectories; a recording's keyframes, which are ordered
 in time, always sequential plus retrieval loop candidates, see :func:`pair_plan`),
@@ -12,7 +14,9 @@ then COLMAP's, :func:`lburst.sfm.colmap.run_job_subprocess`, with a line every
 :data:`lburst.sfm.colmap.HEARTBEAT_SECONDS` while one runs long); the largest model is
 written to ``OUT/colmap/model`` (binary) and
 ``OUT/colmap/model.ply``, and ``OUT/result.json`` holds the metrics
-(:mod:`lburst.sfm.metrics`), the registered images and their poses.
+(:mod:`lburst.sfm.metrics`), the registered images and their poses.  Every input then leaves
+the same files for other tools (:mod:`lburst.sfm.outputs`): hloc's ``features.h5``,
+``matches.h5`` and ``pairs.txt``, ``trajectory.tum`` (and ``reference.tum``), ``report.md``.
 
 Cameras: one COLMAP camera per image, as COLMAP does by default (a shared camera whose
 intrinsics drift in bundle adjustment, as they do under forward motion, stops every later
@@ -31,6 +35,7 @@ centred principal point; ``'default'`` always the latter; ``'reference'`` the sc
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -41,8 +46,10 @@ import numpy as np
 from tqdm import tqdm
 
 from lburst import store
+from lburst.errors import LBurstError, LBurstValueError
 from lburst.features import Features, check_features
-from lburst.io import atomic_path, check_output_outside, file_sha1, read_features_npz, to_uint8, write_image
+from lburst.io import atomic_path, check_output_outside, file_sha1, read_features_npz
+from lburst.sfm.outputs import IMAGES, write_common_frame, write_outputs, write_scene_times
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs
 from lburst.sfm.scene import Scene, SceneError, exif_source, list_scene, load_item, reference_cameras
 from lburst.sources import is_recording
@@ -61,7 +68,7 @@ RECORDING_ABS_POSE_INLIERS = 10
 RESULT_FILE = "result.json"
 
 
-class ReconstructionError(RuntimeError):
+class ReconstructionError(LBurstError, RuntimeError):
     """A scene that cannot be reconstructed (bad input); the message says which file and why."""
 
 
@@ -97,6 +104,9 @@ class ReconstructOptions:
             recording (video or frame folder); ``None``: the defaults.
         matcher: matcher spec (:mod:`lburst.matching`): ``'mnn'`` (mutual nearest
             neighbours), ``'ratio'``, ``'ratio,ratio=0.9'``, ...
+        features: a folder that ``lburst extract --out`` wrote: a burst's features stored
+            there under the same key (:func:`lburst.store.key`: same method and burst) are
+            used, not computed again; ``None``: the output folder.
     """
 
     pairs: str = "auto"
@@ -118,6 +128,7 @@ class ReconstructOptions:
     mapper_threads: int | None = None
     recording: Any = None
     matcher: str = "mnn"
+    features: str | Path | None = None
 
 
 @dataclass
@@ -198,56 +209,60 @@ def _utf8(text: str) -> bool:
     return True
 
 
-def save_features(path: Path, features: Features, key, shape: tuple[int, int], **info) -> None:
-    """Store the features of an image of ``shape`` (H, W) under ``key`` (:mod:`lburst.store`)."""
-    store.save(path, features, (shape[1], shape[0]), key, **info)
-
-
-def load_features(path: Path, key) -> tuple[Features, tuple[int, int]] | None:
-    """Stored features under ``key`` and their image's (H, W), or ``None`` (missing, other key, unreadable)."""
-    found = store.load(path, key)
-    return None if found is None else (found[0], found[1][::-1])
+def stored_paths(out: Path, name: str, extracted: Path | None, recording: Path | None = None) -> list[Path]:
+    """Where the features of burst ``name`` may be stored: reconstruct's own cache
+    ``OUT/features/<name>.npz``, then where ``lburst extract --out EXTRACTED`` puts them
+    (``EXTRACTED/<name>.npz``; a recording's keyframe: ``EXTRACTED/<recording>/<name>.npz``)."""
+    folder = out if extracted is None else Path(extracted)
+    own = [out / "features" / f"{_safe_name(name)}.npz"]
+    if recording is not None:
+        recording = Path(os.path.abspath(recording))  # named as lburst extract names it
+        stem = recording.stem if recording.is_file() else recording.name
+        return own + [folder / stem / f"{name}.npz"]
+    return own + [folder / f"{name}.npz"]
 
 
 def scene_features(
-    scene: Scene, spec: str, out: Path, progress: bool = True, extractor=None
-) -> tuple[list[Features], list[tuple[int, int]]]:
-    """Features and image size (H, W) of each item's common frame; writes ``out/images/<name>.png`` too."""
-    features, shapes = [], []
+    scene: Scene, spec: str, out: Path, progress: bool = True, extractor=None, extracted: Path | None = None
+) -> list[Features]:
+    """Features of each item's common frame (with their ``image_size`` (W, H)); writes
+    ``out/images/<name>.png`` too.  Stored features under the same key
+    (:func:`stored_paths`) are used, not computed again."""
+    features = []
     method = store.method_key(spec)
     for item in tqdm(scene.items, desc=f"features {spec}", disable=not progress, leave=False):
-        cache = out / "features" / f"{_safe_name(item.name)}.npz"
-        image_path = out / "images" / f"{item.name}.png"
-        key = store.burst_key(method, item.path)  # the burst's content and the weights: no stale features
+        paths = stored_paths(out, item.name, extracted)
+        cache = paths[0]
+        image_path = out / IMAGES / f"{item.name}.png"
+        key = store.key(method, item.path)  # the burst's content and the weights: no stale features
         cached = store.load(cache, key)
         if cached is not None and image_path.is_file() and cached[2].get("image_sha1") == file_sha1(image_path):
             features.append(cached[0])
-            shapes.append(cached[1][::-1])
             continue
         burst = load_item(item)
-        common = burst[len(burst) // 2]
-        with atomic_path(image_path) as tmp:
-            write_image(tmp, to_uint8(common))
-        if cached is None:
+        write_common_frame(image_path, burst)
+        found = cached or store.find(paths[1:], key)
+        if found is None:
             if extractor is None:
                 from lburst.methods import create
 
                 extractor = create(spec)
             feats = check_features(extractor(burst))
         else:
-            feats = cached[0]
-        save_features(cache, feats, key, common.shape[:2], image_sha1=file_sha1(image_path))
-        features.append(load_features(cache, key)[0])  # as stored, so a rerun gives the same
-        shapes.append(common.shape[:2])
-    return features, shapes
+            feats = found[0]
+        store.save(cache, feats, (burst.shape[2], burst.shape[1]), key, image_sha1=file_sha1(image_path))
+        features.append(store.load(cache, key)[0])  # as stored, so a rerun gives the same
+    return features
 
 
 def recording_features(
     path: str | Path, spec: str, out: Path, opts: ReconstructOptions, extractor=None
-) -> tuple[Scene, list[Features], list[tuple[int, int]], str | None]:
-    """The keyframe scene of a recording (:mod:`lburst.sfm.recording`), the features and image
-    size (H, W) of each keyframe, and why reading stopped early (or ``None``).  Features are
-    cached as for bursts, keyed on the spec, the recording's content and its options."""
+) -> tuple[Scene, list[Features], str | None]:
+    """The keyframe scene of a recording (:mod:`lburst.sfm.recording`), the features of each
+    keyframe (with their ``image_size`` (W, H)), and why reading stopped early (or ``None``).
+    Features are stored as for bursts, under the store's key of the keyframe (the method,
+    the recording's content and options, the keyframe's name: :func:`lburst.store.key`), the
+    key ``lburst extract`` gives them too, so those it stored are used (:func:`stored_paths`)."""
     from lburst.io import BurstError
     from lburst.sfm import recording as rec
     from lburst.sources import RecordingOptions, open_recording
@@ -256,15 +271,18 @@ def recording_features(
         recording = open_recording(path, opts.recording or RecordingOptions())
     except BurstError as err:
         raise ReconstructionError(str(err)) from err
-    key = f"{store.method_key(spec)['spec']}|{rec.cache_key(recording)}"
+    method, content = store.method_key(spec), store.recording_content(recording)
 
-    def paths(name: str) -> tuple[Path, Path]:
-        return out / "features" / f"{_safe_name(name)}.npz", out / "images" / f"{name}.png"
+    def key(name: str) -> dict:
+        return store.key(method, path, content, keyframe=name)
+
+    def paths(name: str) -> list[Path]:
+        return stored_paths(out, name, opts.features, Path(path))
 
     def cached(name: str) -> bool:
-        return load_features(paths(name)[0], key) is not None and paths(name)[1].is_file()
+        return store.load(paths(name)[0], key(name)) is not None and (out / IMAGES / f"{name}.png").is_file()
 
-    keyframes = rec.load_keyframes(out, key)
+    keyframes = rec.load_keyframes(out, store.key(method, path, content))
     error = None
     if keyframes is None or not all(cached(k.name) for k in keyframes):
         keyframes = []
@@ -273,24 +291,32 @@ def recording_features(
             for keyframe, burst in tqdm(stream, desc=f"keyframes {spec}", disable=not opts.progress, leave=False):
                 if burst is None:
                     continue
-                cache, image_path = paths(keyframe.name)
-                common = burst[len(burst) // 2]
-                with atomic_path(image_path) as tmp:
-                    write_image(tmp, to_uint8(common))
-                if extractor is None:
-                    from lburst.methods import create
+                write_common_frame(out / IMAGES / f"{keyframe.name}.png", burst)
+                found = store.find(paths(keyframe.name), key(keyframe.name))
+                if found is None:
+                    if extractor is None:
+                        from lburst.methods import create
 
-                    extractor = create(spec)
-                save_features(cache, check_features(extractor(burst)), key, common.shape[:2])
+                        extractor = create(spec)
+                    feats = check_features(extractor(burst))
+                else:
+                    feats = found[0]
+                store.save(paths(keyframe.name)[0], feats, (burst.shape[2], burst.shape[1]), key(keyframe.name))
         except BurstError as err:
             error = str(err)
-        rec.save_keyframes(out, key, recording, keyframes, error)
-    features, shapes = [], []
-    for keyframe in keyframes:
-        feats, shape = load_features(paths(keyframe.name)[0], key)
-        features.append(feats)
-        shapes.append(shape)
-    return rec.keyframe_scene(recording, keyframes, out), features, shapes, error
+        rec.save_keyframes(out, store.key(method, path, content), recording, keyframes, error)
+    features = [store.load(paths(k.name)[0], key(k.name))[0] for k in keyframes]
+    return rec.keyframe_scene(recording, keyframes, out), features, error
+
+
+def copy_reference(reference: Path | None, path: Path) -> None:
+    """A scene's ``reference.json`` copied to ``path`` (``OUT/reference.json``, where a
+    recording's is written), or none there when the scene has none."""
+    if reference is None:
+        path.unlink(missing_ok=True)
+        return
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(Path(reference).read_bytes())
 
 
 def check_reference(path: Path) -> dict[str, dict]:
@@ -320,9 +346,10 @@ def calibrated_reference(scene: Scene) -> bool:
 
 
 def scene_cameras(
-    scene: Scene, shapes: list[tuple[int, int]], options: ReconstructOptions
+    scene: Scene, sizes: list[tuple[int, int]], options: ReconstructOptions
 ) -> tuple[list[dict], list[int]]:
-    """COLMAP camera priors (distinct dicts) and the camera index of every image (module docstring)."""
+    """COLMAP camera priors (distinct dicts) and the camera index of every image of size (W, H)
+    ``sizes`` (module docstring)."""
     from lburst.sfm.colmap import default_camera, exif_camera
 
     if options.camera not in ("auto", "default", "reference"):
@@ -333,7 +360,7 @@ def scene_cameras(
     if options.camera == "default" or (options.camera == "auto" and not calibrated_reference(scene)):
         ref_cams = None
     priors = []
-    for item, (h, w) in zip(scene.items, shapes):
+    for item, (w, h) in zip(scene.items, sizes):
         camera = None
         if ref_cams is not None:
             if item.name not in ref_cams:
@@ -411,7 +438,7 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
     loop test, COLMAP's 30 and COLMAP's triangulation, unless the options say otherwise.
     """
     if opts.pairs not in ("auto", "exhaustive", "sequential"):
-        raise ValueError(f"unknown pairing {opts.pairs!r}: expected 'auto', 'exhaustive' or 'sequential'")
+        raise LBurstValueError(f"unknown pairing {opts.pairs!r}: expected 'auto', 'exhaustive' or 'sequential'")
     if recording:
         mode = "sequential" if opts.pairs == "auto" else opts.pairs
         overlap = RECORDING_OVERLAP if opts.overlap is None else opts.overlap
@@ -423,7 +450,7 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
         retrieval = opts.retrieval or 0
         near = opts.near or 0
     if overlap < 1:
-        raise ValueError(f"overlap must be at least 1, got {overlap}")
+        raise LBurstValueError(f"overlap must be at least 1, got {overlap}")
     default_abs = RECORDING_ABS_POSE_INLIERS if recording else 30
     abs_pose = default_abs if opts.abs_pose_inliers is None else opts.abs_pose_inliers
     mapper_threads = opts.mapper_threads if opts.mapper_threads is not None else (1 if recording else None)
@@ -458,7 +485,7 @@ def reconstruct_scene(
     source_error = None
     try:
         if is_recording(scene_dir, opts.recording):
-            scene, features, shapes, source_error = recording_features(scene_dir, method_spec, out, opts, extractor)
+            scene, features, source_error = recording_features(scene_dir, method_spec, out, opts, extractor)
             if source_error and len(scene.items) < 2:  # nothing to reconstruct: say why in result.json too
                 out.mkdir(parents=True, exist_ok=True)
                 ReconstructionResult(
@@ -477,8 +504,11 @@ def reconstruct_scene(
                 f"{scene_dir}: a reconstruction needs at least 2 images, found {len(scene.items)}"
             )
         if not is_recording(scene_dir, opts.recording):
-            features, shapes = scene_features(scene, method_spec, out, opts.progress, extractor)
-        cameras, camera_of_image = scene_cameras(scene, shapes, opts)
+            features = scene_features(scene, method_spec, out, opts.progress, extractor, opts.features)
+            write_scene_times(out, str(scene_dir), scene.names)
+            copy_reference(scene.reference_path, out / "reference.json")
+        sizes = [(int(f["image_size"][0]), int(f["image_size"][1])) for f in features]
+        cameras, camera_of_image = scene_cameras(scene, sizes, opts)
     except SceneError as err:
         raise ReconstructionError(str(err)) from err
     n = len(scene.items)
@@ -583,8 +613,5 @@ def reconstruct_scene(
     if scene.reference_path is not None and not result.error:
         result.metrics.update(evaluate_against_reference(result, scene.reference_path))
     result.save()
-    if is_recording(scene_dir, opts.recording):
-        from lburst.sfm.outputs import write_recording_outputs
-
-        write_recording_outputs(result, features, shapes, pairs, matches, scores)
+    write_outputs(result, features, pairs, matches, scores)
     return result

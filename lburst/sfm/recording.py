@@ -4,8 +4,8 @@ The keyframes are known only once the recording has been read (a video's frame c
 is a promise of its container), so :func:`stream_keyframes` reads it once, yielding each
 keyframe's burst, or ``None`` for a keyframe the caller has cached, and
 :func:`keyframe_scene` turns the keyframes that were read into a :class:`Scene`.
-``OUT/keyframes.json`` records them with the recording's fingerprint and options
-(:func:`save_keyframes`); a rerun whose keyframes are all cached skips reading the
+``OUT/keyframes.json`` records them with the store's key of the recording (its content and
+options, :func:`lburst.store.recording_content`; :func:`save_keyframes`); a rerun whose keyframes are all cached skips reading the
 recording.  With a ground truth (``gt.txt``), ``OUT/reference.json`` holds the true
 poses of the keyframes (the ground-truth pose within 1 ms of each keyframe's timestamp)
 and the camera of ``meta.json``, so the usual metrics apply.
@@ -24,33 +24,14 @@ from lburst.sfm.poses import path_length
 from lburst.sfm.reference import Reference
 from lburst.sfm.scene import Scene, SceneItem
 from lburst.sources import Keyframe, Recording
-from lburst.store import files_sha1
 from lburst.tum import lookup, read_tum
 
 KEYFRAMES_FILE = "keyframes.json"
 
 
-def fingerprint(recording: Recording) -> str:
-    """SHA-1 over the recording's whole content: a video's bytes, or every frame file's name
-    and bytes (:func:`lburst.store.files_sha1`).
-
-    Every byte counts, so a change anywhere (frames re-encoded in the middle of a video, a
-    frame file rewritten at the same size) computes the keyframes again.  Sampling the
-    file (its size and first and last MiB) missed such changes and served stale features;
-    trusting ``(size, mtime_ns)`` misses them too where a copy keeps the times (``cp -p``,
-    ``rsync -a``, ``tar``) or a clock goes back.  Reading costs about a second per GB from a
-    warm disk, once per run, far less than decoding the recording.
-    """
-    return files_sha1([recording.path] if recording.is_video else recording.files)
-
-
-def cache_key(recording: Recording) -> str:
-    """What the features of a keyframe depend on besides the method: content and options."""
-    return f"{fingerprint(recording)}|{recording.options.signature()}"
-
-
-def load_keyframes(out: Path, key: str) -> list[Keyframe] | None:
-    """The keyframes of a finished earlier read with the same ``key``, else ``None``."""
+def load_keyframes(out: Path, key: dict) -> list[Keyframe] | None:
+    """The keyframes of a finished earlier read with the same ``key`` (the store's key of the
+    recording, :func:`lburst.store.key`, without a keyframe), else ``None``."""
     path = out / KEYFRAMES_FILE
     try:
         data = json.loads(path.read_text())
@@ -61,7 +42,7 @@ def load_keyframes(out: Path, key: str) -> list[Keyframe] | None:
     return [Keyframe(k["index"], k["time"], k["filled"]) for k in data["keyframes"]]
 
 
-def save_keyframes(out: Path, key: str, recording: Recording, keyframes: list[Keyframe], error: str | None) -> None:
+def save_keyframes(out: Path, key: dict, recording: Recording, keyframes: list[Keyframe], error: str | None) -> None:
     data = {
         "recording": str(recording.path),
         "key": key,

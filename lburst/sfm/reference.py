@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.io import atomic_path
 
 
@@ -100,11 +101,11 @@ class Reference:
         try:
             data = json.loads(path.read_text())
         except json.JSONDecodeError as err:
-            raise ValueError(f"{path}: not valid JSON ({err})") from err
+            raise LBurstValueError(f"{path}: not valid JSON ({err})") from err
         try:
             return cls._from_json(data)
         except (KeyError, TypeError, ValueError) as err:
-            raise ValueError(f"{path}: malformed reference file: {err!r}") from err
+            raise LBurstValueError(f"{path}: malformed reference file: {err!r}") from err
 
     @classmethod
     def _from_json(cls, data: Any) -> "Reference":
@@ -115,30 +116,30 @@ class Reference:
             if key not in camera:
                 raise KeyError(f"camera.{key}")
         if len(camera["params"]) < 4:
-            raise ValueError(f"camera.params needs at least 4 values, got {camera['params']}")
+            raise LBurstValueError(f"camera.params needs at least 4 values, got {camera['params']}")
         for key in ("width", "height"):
             if isinstance(camera[key], bool) or not isinstance(camera[key], int) or camera[key] < 1:
-                raise ValueError(f"camera.{key} must be a positive integer, got {camera[key]!r}")
+                raise LBurstValueError(f"camera.{key} must be a positive integer, got {camera[key]!r}")
         params = np.asarray(camera["params"], dtype=np.float64)
         if not np.all(np.isfinite(params)) or params[0] <= 0:
-            raise ValueError(f"camera.params must be finite with a positive focal length, got {camera['params']}")
+            raise LBurstValueError(f"camera.params must be finite with a positive focal length, got {camera['params']}")
         poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for name, pose in data["images"].items():
             R = np.asarray(pose["R"], dtype=np.float64)
             t = np.asarray(pose["t"], dtype=np.float64)
             if R.shape != (3, 3) or t.shape != (3,):
-                raise ValueError(f"image {name!r}: R must be 3x3 and t length 3, got {R.shape} and {t.shape}")
+                raise LBurstValueError(f"image {name!r}: R must be 3x3 and t length 3, got {R.shape} and {t.shape}")
             if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-                raise ValueError(f"image {name!r}: R and t must be finite (no NaN or inf)")
+                raise LBurstValueError(f"image {name!r}: R and t must be finite (no NaN or inf)")
             if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
-                raise ValueError(f"image {name!r}: R is not a rotation (orthonormal, determinant +1)")
+                raise LBurstValueError(f"image {name!r}: R is not a rotation (orthonormal, determinant +1)")
             poses[name] = (R, t)
         length = data.get("length")
         if length is not None and (isinstance(length, bool) or not np.isfinite(float(length)) or float(length) <= 0):
-            raise ValueError(f"length must be a positive number of metres, got {length!r}")
+            raise LBurstValueError(f"length must be a positive number of metres, got {length!r}")
         calibrated = data.get("calibrated")
         if calibrated is not None and not isinstance(calibrated, bool):
-            raise ValueError(f"calibrated must be true or false, got {calibrated!r}")
+            raise LBurstValueError(f"calibrated must be true or false, got {calibrated!r}")
         return cls(
             source=str(data["source"]),
             camera=dict(camera),

@@ -19,14 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.io import natural_key
+from lburst.errors import LBurstValueError
+from lburst.io import IMAGE_SUFFIXES, natural_key
 from lburst.sfm.reference import Reference
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
 REFERENCE_FILE = "reference.json"
 
 
-class SceneError(ValueError):
+class SceneError(LBurstValueError):
     """A scene folder (or one of its items) that cannot be used; the message names it."""
 
 

@@ -20,11 +20,9 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
-from lburst.io import decode_file
+from lburst.errors import LBurstFileNotFoundError, LBurstOSError, LBurstValueError
+from lburst.io import IMAGE_SUFFIXES, decode_file
 from lburst.train.pairs import PairConfig, training_pair
-
-IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".ppm"}
-
 
 Split = Literal["train", "validation", "all"]
 
@@ -40,16 +38,16 @@ def list_photos(folders: list[str | Path], split: Split = "train") -> list[Path]
     ``split``: ``'train'`` leaves out the validation tenth (:func:`is_validation_photo`),
     ``'validation'`` keeps only it, ``'all'`` keeps every photo."""
     if split not in ("train", "validation", "all"):
-        raise ValueError(f"split must be 'train', 'validation' or 'all', got {split!r}")
+        raise LBurstValueError(f"split must be 'train', 'validation' or 'all', got {split!r}")
     photos: list[Path] = []
     for folder in folders:
         folder = Path(folder)
         if not folder.is_dir():
-            raise FileNotFoundError(f"{folder}: training photo folder not found")
+            raise LBurstFileNotFoundError(f"{folder}: training photo folder not found")
         found = sorted(p for p in folder.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
         photos += [p for p in found if split == "all" or is_validation_photo(p) == (split == "validation")]
     if not photos:
-        raise FileNotFoundError(
+        raise LBurstFileNotFoundError(
             f"no {split} photos ({', '.join(sorted(IMAGE_SUFFIXES))}) under {', '.join(map(str, folders))}"
         )
     return photos
@@ -77,7 +75,7 @@ class PairDataset(Dataset):
             if photo is not None:
                 break
         else:
-            raise OSError(f"could not read training photos (last tried {path})")
+            raise LBurstOSError(f"could not read training photos (last tried {path})")
         pair = training_pair(cv2.cvtColor(photo, cv2.COLOR_BGR2RGB), rng, self.cfg)
         item = {
             "burst_a": torch.from_numpy(pair.burst_a).permute(0, 3, 1, 2),

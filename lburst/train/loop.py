@@ -24,6 +24,8 @@ import torch.nn.functional as F
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
+from lburst.errors import LBurstFileExistsError, LBurstValueError
+from lburst.extras import MissingExtra
 from lburst.io import atomic_path
 from lburst.model.lite import LITE_NAME, LiteConfig, LiteNet
 from lburst.model.network import (
@@ -238,7 +240,7 @@ def build_network(arch: str, frames: int) -> torch.nn.Module:
         return LiteNet(LiteConfig(frames=frames))
     if arch.startswith(LITE_NAME):
         return LiteNet(replace(LiteConfig.from_net_string(arch), frames=frames))
-    raise ValueError(f"unknown architecture {arch!r}: use {', '.join(ARCHS)} or an {LITE_NAME}(...) string")
+    raise LBurstValueError(f"unknown architecture {arch!r}: use {', '.join(ARCHS)} or an {LITE_NAME}(...) string")
 
 
 def device_memory_limit(device: torch.device) -> int | None:
@@ -254,7 +256,9 @@ def load_teacher(spec: str, frames: int, device: torch.device) -> torch.nn.Modul
 
     teacher, _ = load_checkpoint(resolve_weights(spec), device)
     if teacher.config.frames != frames:
-        raise ValueError(f"teacher {spec}: a {teacher.config.frames}-frame network, but the run has {frames} frames")
+        raise LBurstValueError(
+            f"teacher {spec}: a {teacher.config.frames}-frame network, but the run has {frames} frames"
+        )
     for p in teacher.parameters():
         p.requires_grad_(False)
     return teacher.eval()
@@ -315,7 +319,7 @@ def training_step(
         loss = loss + spread_weight * losses["spread"]
     if distill_weight > 0 and teacher_on_noisy:
         if teacher is None:
-            raise ValueError("teacher_on_noisy needs a teacher")
+            raise LBurstValueError("teacher_on_noisy needs a teacher")
         with torch.no_grad(), torch.autocast(device_type=x.device.type, dtype=dtype, enabled=dtype is not None):
             target = teacher(x)
         student = {k: out[k].float() for k in ("descriptors", "repeatability", "reliability")}
@@ -323,7 +327,7 @@ def training_step(
         loss = loss + distill_weight * losses["distill"]
     elif distill_weight > 0:
         if teacher is None or "clean_a" not in batch:
-            raise ValueError("distill_weight > 0 needs a teacher and the batch's clean_a")
+            raise LBurstValueError("distill_weight > 0 needs a teacher and the batch's clean_a")
         clean = _normalise(batch["clean_a"]).contiguous(memory_format=memory_format)
         was_training = teacher.training
         teacher.eval()
@@ -433,24 +437,24 @@ def train(
             tensorboard=cfg.tensorboard,
         )
     elif last.is_file():
-        raise FileExistsError(f"{last} exists: pass --resume to continue it, or choose another --out")
+        raise LBurstFileExistsError(f"{last} exists: pass --resume to continue it, or choose another --out")
     if precision is not None:  # a property of the machine, not of the recipe: a resumed run may change it
         cfg = replace(cfg, precision=precision)
     check_precision(cfg.precision, device)
     photos = list_photos([Path(p) for p in photo_folders])
     total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / (cfg.batch_size * ctx.world))
     if total < 1:
-        raise ValueError(f"a run needs at least 1 step, got {total} (--steps, or --epochs x photos / batch)")
+        raise LBurstValueError(f"a run needs at least 1 step, got {total} (--steps, or --epochs x photos / batch)")
     torch.manual_seed(cfg.seed)
     net = build_network(cfg.arch, cfg.frames)
     if cfg.init and state is None:
         init_net, _ = load_checkpoint(cfg.init)
         if type(init_net) is not type(net):
-            raise ValueError(f"{cfg.init}: not a network of the run's architecture {cfg.arch!r}")
+            raise LBurstValueError(f"{cfg.init}: not a network of the run's architecture {cfg.arch!r}")
         if init_net.config.frames == 1 and cfg.frames > 1:
             init_net = replicate_frames(init_net, cfg.frames)
         if init_net.config.frames != cfg.frames:
-            raise ValueError(
+            raise LBurstValueError(
                 f"{cfg.init}: a {init_net.config.frames}-frame network, but the run has {cfg.frames} frames"
             )
         net.load_state_dict(init_net.state_dict())
@@ -603,7 +607,7 @@ def _tensorboard_writer(out: Path):
     try:
         from torch.utils.tensorboard import SummaryWriter
     except ImportError as exc:
-        raise RuntimeError("--tensorboard needs the tensorboard package: pip install 'lburst[tensorboard]'") from exc
+        raise MissingExtra("--tensorboard needs tensorboard: pip install 'lburst[tensorboard]'") from exc
     return SummaryWriter(str(out / "tensorboard"))
 
 
@@ -661,4 +665,4 @@ def check_resume_options(out: str | Path, given: dict) -> None:
         if value is not None and name not in RESUME_OVERRIDES and name in saved and saved[name] != value
     ]
     if ignored:
-        raise ValueError(f"{out}: a resumed run keeps its own settings; leave out {', '.join(ignored)}")
+        raise LBurstValueError(f"{out}: a resumed run keeps its own settings; leave out {', '.join(ignored)}")

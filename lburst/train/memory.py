@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import torch
 
+from lburst.errors import LBurstValueError
 from lburst.model.extractor import memory_limit_bytes
 
 #: Bytes per burst pixel that the losses hold beside the network (fitted, see above).
@@ -65,7 +66,7 @@ def check_step_memory(
         return
     one = step_bytes(net, channels, 1, crop) - BASE_BYTES
     fits = max(0, (limit - BASE_BYTES) // one)
-    raise ValueError(
+    raise LBurstValueError(
         f"--batch-size {batch_size}: a training step of {batch_size} pairs of {crop}-px bursts needs about "
         f"{need / 2**30:.1f} GiB, more than half of this machine's memory ({limit / 2**30:.1f} GiB); "
         f"lower --batch-size (about {fits} fit)"

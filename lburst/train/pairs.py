@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lburst.errors import LBurstValueError
 from lburst.motion import BurstMotion
 from lburst.noise import IMAGENET_STD, LowLightNoise
 
@@ -214,7 +215,7 @@ def _align(frames: np.ndarray, shifts: np.ndarray) -> np.ndarray:
 def training_pair(photo: np.ndarray, rng: np.random.Generator, cfg: PairConfig = PairConfig()) -> TrainingPair:
     """Draw one training pair from ``photo`` (H, W, 3) uint8 RGB."""
     if photo.ndim != 3 or photo.shape[2] != 3:
-        raise ValueError(f"expected an RGB photo (H, W, 3), got {photo.shape}")
+        raise LBurstValueError(f"expected an RGB photo (H, W, 3), got {photo.shape}")
     photo = _rescale(photo, rng, cfg).astype(np.float32)
     h, w = photo.shape[:2]
     crop = cfg.crop

@@ -29,6 +29,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from lburst.errors import LBurstValueError
 from lburst.io import read_image
 from lburst.model.extractor import LBurst
 from lburst.model.network import load_checkpoint, save_checkpoint
@@ -43,7 +44,7 @@ def sample_photos(folders: Sequence[str | Path], count: int, seed: int = 0) -> l
     from lburst.train.data import list_photos
 
     if count < 1:
-        raise ValueError(f"count must be at least 1, got {count}")
+        raise LBurstValueError(f"count must be at least 1, got {count}")
     photos = list_photos(list(folders), split="train")
     pick = np.random.default_rng(seed).choice(len(photos), min(count, len(photos)), replace=False)
     return [photos[i] for i in sorted(pick)]
@@ -62,7 +63,7 @@ def descriptor_statistics(
     """Mean (D,) and covariance (D, D) of ``model``'s raw (never whitened) keypoint descriptors over one
     synthetic burst per photo (``extract_options``: :class:`lburst.model.extractor.MultiScaleConfig` fields)."""
     if not photos:
-        raise ValueError("no photos to measure descriptor statistics on")
+        raise LBurstValueError("no photos to measure descriptor statistics on")
     total = outer = None
     count = 0
     for photo in tqdm(photos, desc="descriptor statistics", disable=not progress, leave=False):
@@ -76,7 +77,7 @@ def descriptor_statistics(
         outer = desc.T @ desc if outer is None else outer + desc.T @ desc
         count += len(desc)
     if count < 2:
-        raise ValueError("the model found fewer than 2 keypoints on the photos")
+        raise LBurstValueError("the model found fewer than 2 keypoints on the photos")
     mean = total / count
     cov = (outer - count * np.outer(mean, mean)) / (count - 1)
     return mean.astype(np.float32), cov
@@ -86,7 +87,7 @@ def whitening_matrix(cov: np.ndarray, power: float = 1.0, eps: float = EPS) -> n
     """Symmetric (D, D) ``V diag(lambda + eps * mean(lambda))^(-power / 2) V^T`` of ``cov``."""
     cov = np.asarray(cov, np.float64)
     if cov.ndim != 2 or cov.shape[0] != cov.shape[1] or not np.isfinite(cov).all():
-        raise ValueError(f"expected a finite square covariance, got shape {cov.shape}")
+        raise LBurstValueError(f"expected a finite square covariance, got shape {cov.shape}")
     lam, vec = np.linalg.eigh((cov + cov.T) / 2)
     lam = np.clip(lam, 0, None)
     scale = (lam + eps * max(lam.mean(), 1e-12)) ** (-power / 2)

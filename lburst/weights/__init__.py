@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from lburst.errors import LBurstFileNotFoundError, LBurstValueError
+
 HERE = Path(__file__).parent
 NAMES = ("lburst-b5", "lburst-b1", "lburst-b5-lite")
 
@@ -11,10 +13,10 @@ NAMES = ("lburst-b5", "lburst-b1", "lburst-b5-lite")
 def weights_path(name: str) -> Path:
     """Path of the shipped checkpoint ``name`` (one of :data:`NAMES`)."""
     if name not in NAMES:
-        raise ValueError(f"unknown weights {name!r}; shipped: {', '.join(NAMES)}")
+        raise LBurstValueError(f"unknown weights {name!r}; shipped: {', '.join(NAMES)}")
     path = HERE / f"{name}.pt"
     if not path.is_file():
-        raise FileNotFoundError(
+        raise LBurstFileNotFoundError(
             f"{name} weights are not shipped in this version ({path} missing; see lburst/weights/README.md): "
             "pass a checkpoint with --weights PATH or set LBURST_WEIGHTS"
         )
