@@ -13,7 +13,13 @@ from lburst.cli.options import add_matcher_argument
 def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", type=Path, help="folder of sequence folders (Oxford or HPatches layout)")
     p.add_argument("--methods", nargs="+", default=["lburst", "sift", "orb", "merge+sift"])
-    p.add_argument("--sigma", type=real(0), nargs="+", default=[25, 50, 100], help="Gaussian noise std levels (0..255)")
+    p.add_argument(
+        "--sigma",
+        type=real(0),
+        nargs="*",
+        default=[25, 50, 100],
+        help="Gaussian noise std levels (0..255; none given: only the --noise specs)",
+    )
     p.add_argument(
         "--noise",
         nargs="*",
