@@ -138,6 +138,7 @@ def run_demo(
     from lburst.model.extractor import LBurst
     from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
     from lburst.sfm.metrics import markdown_table
+    from lburst.sfm.options import ReconstructOptions
     from lburst.sfm.reconstruct import reconstruct_scene
     from lburst.viz import plot_keypoints_and_maps
 
@@ -156,11 +157,9 @@ def run_demo(
             out / "scene",
             spec,
             out / label,
-            camera="reference",
-            fix_intrinsics=True,
-            pairs="sequential",
-            overlap=overlap,
-            matcher=matcher,
+            ReconstructOptions(
+                camera="reference", fix_intrinsics=True, pairs="sequential", overlap=overlap, matcher=matcher
+            ),
         )
         results[label] = result
         rows.append({"method": label, "scene": "night flight", **result.metrics})

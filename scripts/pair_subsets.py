@@ -35,7 +35,7 @@ def main() -> None:
 
     from lburst.sfm.colmap import ColmapJob, ColmapOptions, loop_test, map_database, pycolmap, summarize
     from lburst.sfm.metrics import evaluate_against_reference
-    from lburst.sfm.reconstruct import ReconstructionResult
+    from lburst.sfm.result import ReconstructionResult
 
     job = ColmapJob.load(args.run / "colmap" / "job.json")
     names = job.names

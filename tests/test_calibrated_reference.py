@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from lburst.io import write_image
-from lburst.sfm.reconstruct import ReconstructOptions, calibrated_reference, scene_cameras
+from lburst.sfm.cameras import calibrated_reference, scene_cameras
+from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.scene import list_scene
 
 CAMERA = {"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 50.0, 32.0, 24.0]}

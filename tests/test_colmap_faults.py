@@ -15,6 +15,7 @@ import pytest
 from lburst.process import FolderInUse, folder_lock
 from lburst.sfm import ReconstructionError, reconstruct_scene
 from lburst.sfm.colmap import ColmapError, check_camera, failure_summary, run_job_subprocess
+from lburst.sfm.options import ReconstructOptions
 
 GLOG_ABORT = """I0101 10:00:00.000000 123 misc.cc:44] Feature matching
 F0101 10:00:01.000000 123 camera.cc:120] Check failed: params_.size() == NumParams() (2 vs. 4)
@@ -124,9 +125,9 @@ def test_a_bad_reference_json_fails_before_colmap_runs(tmp_path):
     }
     (scene / "reference.json").write_text(json.dumps(reference))
     with pytest.raises(ReconstructionError, match=r"reference.json.*PINHOLE takes 4 params, got 2|reference.json"):
-        reconstruct_scene(scene, "sift", out, camera="reference", progress=False)
+        reconstruct_scene(scene, "sift", out, ReconstructOptions(camera="reference", progress=False))
     assert not (out / "colmap" / "colmap.log").exists()
     del reference["images"]
     (scene / "reference.json").write_text(json.dumps(reference))
     with pytest.raises(ReconstructionError, match="reference.json: malformed"):
-        reconstruct_scene(scene, "sift", out, progress=False)
+        reconstruct_scene(scene, "sift", out, ReconstructOptions(progress=False))

@@ -61,7 +61,7 @@ def test_every_exception_class_of_lburst_derives_from_lburst_error():
         ("lburst.io.BurstError", ValueError),
         ("lburst.model.network.CheckpointError", ValueError),
         ("lburst.sfm.scene.SceneError", ValueError),
-        ("lburst.sfm.reconstruct.ReconstructionError", RuntimeError),
+        ("lburst.sfm.result.ReconstructionError", RuntimeError),
         ("lburst.sfm.colmap.ColmapError", RuntimeError),
         ("lburst.extras.MissingExtra", ImportError),
         ("lburst.process.FolderInUse", OSError),

@@ -4,6 +4,7 @@ with a trajectory error below 1% of its length (the whole pipeline against groun
 import pytest
 
 from lburst.sfm import reconstruct_scene
+from lburst.sfm.options import ReconstructOptions
 
 
 @pytest.fixture(scope="module")
@@ -22,12 +23,9 @@ def test_every_image_registers_at_zero_noise(clean_flight, tmp_path, method):
         clean_flight,
         method,
         tmp_path / method,
-        progress=False,
-        camera="reference",
-        fix_intrinsics=True,
-        pairs="sequential",
-        overlap=4,
-        num_threads=1,
+        ReconstructOptions(
+            progress=False, camera="reference", fix_intrinsics=True, pairs="sequential", overlap=4, num_threads=1
+        ),
     )  # one thread: the same result on a busy or an idle machine
     assert result.error is None and result.registered == result.names
     assert result.metrics["ate_percent"] < 1.0

@@ -35,11 +35,13 @@ def _runtime_nodes(tree: ast.AST):
         stack.extend(ast.iter_child_nodes(node))
 
 
-def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
-    """lburst modules that ``name`` imports anywhere it runs (module level or in functions)."""
+def imports_of(name: str, path: Path, modules: dict[str, Path], type_only: bool = True) -> set[str]:
+    """lburst modules that ``name`` imports anywhere (module level or in functions), those of
+    ``if TYPE_CHECKING:`` blocks too unless ``type_only`` is false (only the imports that run)."""
     package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
     found = set()
-    for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"))):
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in ast.walk(tree) if type_only else _runtime_nodes(tree):
         if isinstance(node, ast.Import):
             found |= {alias.name for alias in node.names}
         elif isinstance(node, ast.ImportFrom):
@@ -95,21 +97,50 @@ def cycles(graph: dict[str, set[str]]) -> list[set[str]]:
     return out
 
 
-def import_graph() -> dict[str, set[str]]:
+def import_graph(type_only: bool = True) -> dict[str, set[str]]:
+    """Module -> the lburst modules it imports (``import lburst.x``, ``from lburst.x import y``,
+    relative ones), at module level, in functions and, with ``type_only``, in ``if TYPE_CHECKING:``."""
     modules = module_names()
-    return {name: imports_of(name, path, modules) for name, path in modules.items()}
+    return {name: imports_of(name, path, modules, type_only) for name, path in modules.items()}
 
 
 def test_the_import_graph_is_read():
     graph = import_graph()
     assert "lburst.sfm.poses" in graph["lburst.sfm.metrics"]
     assert "lburst.features" in graph["lburst.methods.merge"]
-    assert "lburst.sfm.colmap" in graph["lburst.sfm.reconstruct"]  # imported inside a function
+    assert "lburst.sfm.retrieval" in graph["lburst.sfm.reconstruct"]  # imported inside a function
+    assert "lburst.methods" in graph["lburst.sfm.feature_stage"]  # inside a nested function
+    typed = [n for n, p in module_names().items() if "TYPE_CHECKING" in p.read_text(encoding="utf-8")]
+    assert typed and all(graph[n] >= import_graph(type_only=False)[n] for n in typed)
+
+
+def test_type_only_imports_are_in_the_graph(tmp_path):
+    """An import under ``if TYPE_CHECKING:`` is an arrow too (``outputs`` <-> ``reconstruct`` was
+    a cycle through one)."""
+    module = tmp_path / "m.py"
+    module.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from lburst.sfm.result import Status\n")
+    modules = module_names()
+    assert imports_of("lburst.m", module, modules) == {"lburst.sfm.result"}
+    assert imports_of("lburst.m", module, modules, type_only=False) == set()
 
 
 def test_no_two_modules_import_each_other():
     found = cycles(import_graph())
     assert not found, f"import cycles between modules: {[sorted(c) for c in found]}"
+
+
+def test_no_cycle_through_the_imports_that_run():
+    found = cycles(import_graph(type_only=False))
+    assert not found, f"import cycles between modules: {[sorted(c) for c in found]}"
+
+
+def test_the_reconstruct_pipeline_is_split_by_concept():
+    """``sfm/reconstruct.py`` runs the stages; options, result, cameras, features and pairs are
+    their own modules (issue 28)."""
+    lines = len((ROOT / "sfm" / "reconstruct.py").read_text(encoding="utf-8").splitlines())
+    assert lines <= 300, f"lburst/sfm/reconstruct.py has {lines} lines"
+    for module in ("options", "result", "cameras", "feature_stage", "pairs", "match"):
+        assert f"lburst.sfm.{module}" in import_graph()["lburst.sfm.reconstruct"]
 
 
 def imports_argparse(path: Path) -> bool:

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from lburst.sfm.colmap import ColmapJob, ColmapOptions, default_camera, loop_test, pycolmap, run_job
-from lburst.sfm.pairs import make_pairs
-from lburst.sfm.reconstruct import ReconstructOptions, pair_plan
+from lburst.sfm.options import ReconstructOptions
+from lburst.sfm.pairs import make_pairs, pair_plan
 
 
 @pytest.mark.parametrize("n", [2, 3, 7, 15, 20, 21, 40])

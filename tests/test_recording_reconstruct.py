@@ -9,6 +9,8 @@ import pytest
 
 from lburst.scenes.night_flight import NightFlightConfig
 from lburst.sfm import reconstruct_scene
+from lburst.sfm.options import ReconstructOptions
+from lburst.sfm.result import Status
 from lburst.sources import RecordingOptions
 from lburst.tum import read_tum
 
@@ -37,10 +39,13 @@ def test_simulated_video_has_per_frame_ground_truth(video):
 
 def test_video_reconstructs_and_evo_agrees(video, tmp_path):
     result = reconstruct_scene(
-        video, SIFT, tmp_path / "out", progress=False, extra=FAST, recording=RecordingOptions(burst=3, every=16)
+        video,
+        SIFT,
+        tmp_path / "out",
+        ReconstructOptions(progress=False, extra=FAST, recording=RecordingOptions(burst=3, every=16)),
     )
     assert result.names == [f"f{i:06d}_t{i / 20:.3f}s" for i in range(0, 97, 16)]
-    assert result.registered == result.names and result.source_error is None
+    assert result.registered == result.names and result.status == Status.COMPLETE and result.error is None
     assert result.metrics["ate_percent"] < 1.0
     out = tmp_path / "out"
     times, _ = read_tum(out / "trajectory.tum")
@@ -75,9 +80,12 @@ def test_truncated_video_keeps_the_keyframes_before_the_cut(video, tmp_path):
     data = video.read_bytes()
     cut.write_bytes(data[: int(len(data) * 0.8)])
     result = reconstruct_scene(
-        cut, SIFT, tmp_path / "out", progress=False, extra=FAST, recording=RecordingOptions(burst=3, every=16)
+        cut,
+        SIFT,
+        tmp_path / "out",
+        ReconstructOptions(progress=False, extra=FAST, recording=RecordingOptions(burst=3, every=16)),
     )
-    assert "cut.mp4" in result.source_error and "truncated" in result.source_error
+    assert result.status == Status.PARTIAL and "cut.mp4" in result.error and "truncated" in result.error
     assert 2 <= len(result.names) < 7 and result.registered == result.names
 
 
@@ -89,7 +97,10 @@ def test_dng_recording_reconstructs(tmp_path):
     folder = write_flight_dng(tmp_path / "dng", cfg, progress=False)
     assert len(list(folder.glob("*.dng"))) == 65
     result = reconstruct_scene(
-        folder, SIFT, tmp_path / "out", progress=False, extra=FAST, recording=RecordingOptions(burst=1, every=16)
+        folder,
+        SIFT,
+        tmp_path / "out",
+        ReconstructOptions(progress=False, extra=FAST, recording=RecordingOptions(burst=1, every=16)),
     )
     assert result.registered == result.names and len(result.names) == 5
     assert result.metrics["ate_percent"] < 1.0
@@ -102,9 +113,7 @@ def test_the_light_network_reconstructs_a_recording(video, tmp_path):
         video,
         "lburst-lite",
         tmp_path / "out",
-        progress=False,
-        extra=FAST,
-        recording=RecordingOptions(burst=5, every=16),
+        ReconstructOptions(progress=False, extra=FAST, recording=RecordingOptions(burst=5, every=16)),
     )
     assert result.registered == result.names and len(result.names) == 7
     assert result.metrics["ate_percent"] < 1.0

@@ -5,6 +5,7 @@ import json
 import pytest
 
 from lburst.sfm import ReconstructionResult, evaluate_against_reference, reconstruct_scene
+from lburst.sfm.options import ReconstructOptions
 
 
 @pytest.fixture(scope="module")
@@ -23,9 +24,7 @@ def test_sift_registers_a_synthetic_flight(flight, tmp_path):
         flight,
         "sift,max_features=1500",
         tmp_path / "out",
-        progress=False,
-        single_camera=True,  # one camera flew: share its intrinsics
-        extra={"max_num_trials": 2000},
+        ReconstructOptions(progress=False, single_camera=True, extra={"max_num_trials": 2000}),
     )  # fewer RANSAC trials: a faster test
     assert result.error is None and result.converged
     assert result.registered == result.names  # every image, in trajectory order
@@ -53,10 +52,7 @@ def test_global_mapper_registers_the_flight(flight, tmp_path):
         flight,
         "sift,max_features=1500",
         tmp_path / "out",
-        progress=False,
-        mapper="global",
-        single_camera=True,
-        extra={"max_num_trials": 2000},
+        ReconstructOptions(progress=False, mapper="global", single_camera=True, extra={"max_num_trials": 2000}),
     )
     assert result.error is None and result.registered == result.names
     assert result.metrics["ate_percent"] < 1.0

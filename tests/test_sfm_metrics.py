@@ -5,7 +5,7 @@ import json
 from lburst.bench.reconstruction import run_benchmark
 from lburst.methods import method_slug
 from lburst.sfm.metrics import aggregate, markdown_table, scene_metrics
-from lburst.sfm.reconstruct import ReconstructionResult
+from lburst.sfm.result import ReconstructionResult
 
 
 def test_scene_metrics_by_hand():

@@ -6,6 +6,7 @@ import pytest
 
 from lburst.cli import main as cli
 from lburst.sfm import ReconstructionError, ReconstructionResult, reconstruct_scene
+from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.scene import list_scene
 
 
@@ -32,7 +33,7 @@ def test_scene_listing_natural_order(tmp_path):
 def test_empty_folder(tmp_path, capsys):
     (tmp_path / "scene").mkdir()
     with pytest.raises(ReconstructionError, match="no bursts"):
-        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", progress=False)
+        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", ReconstructOptions(progress=False))
     assert cli(["reconstruct", str(tmp_path / "scene"), "--method", "sift", "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("lburst reconstruct: error: ") and "no bursts" in err[0], err
@@ -41,14 +42,14 @@ def test_empty_folder(tmp_path, capsys):
 def test_one_image(tmp_path):
     write_png(tmp_path / "scene" / "a.png", noise_image(0))
     with pytest.raises(ReconstructionError, match="at least 2 images"):
-        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", progress=False)
+        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", ReconstructOptions(progress=False))
 
 
 def test_unreadable_image_is_named(tmp_path):
     write_png(tmp_path / "scene" / "a.png", noise_image(0))
     (tmp_path / "scene" / "b.png").write_bytes(b"not a png")
     with pytest.raises(ReconstructionError, match="b.png"):
-        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", progress=False)
+        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", ReconstructOptions(progress=False))
 
 
 def test_unreadable_burst_frame_is_named(tmp_path):
@@ -56,7 +57,7 @@ def test_unreadable_burst_frame_is_named(tmp_path):
     write_png(tmp_path / "scene" / "b1" / "frame_000.png", noise_image(1))
     (tmp_path / "scene" / "b1" / "frame_000.png").write_bytes(b"broken")
     with pytest.raises(ReconstructionError, match="frame_000.png"):
-        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", progress=False)
+        reconstruct_scene(tmp_path / "scene", "sift", tmp_path / "out", ReconstructOptions(progress=False))
 
 
 def test_unrelated_images_register_nothing_without_crashing(tmp_path, capsys):

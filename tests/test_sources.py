@@ -254,4 +254,5 @@ def test_a_recording_that_fails_before_two_keyframes_still_writes_result_json(tm
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("lburst reconstruct: error: ") and "img_0.png: not a readable image" in err[-1], err
     result = json.loads((tmp_path / "out" / "result.json").read_text())
-    assert "img_0.png" in result["source_error"] and "no model" in result["error"] and result["registered"] == []
+    assert result["status"] == "source_failed" and result["registered"] == []
+    assert "img_0.png" in result["error"] and "no model" in result["error"]

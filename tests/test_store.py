@@ -11,6 +11,7 @@ from lburst.io import read_image
 from lburst.methods import create
 from lburst.model.network import LBurstNet, NetConfig, save_checkpoint
 from lburst.sfm import reconstruct_scene
+from lburst.sfm.options import ReconstructOptions
 
 
 def _photo(seed, size=(120, 160)):
@@ -38,9 +39,9 @@ def test_reconstruct_computes_a_changed_burst_again(tmp_path):
     scene.mkdir()
     for i in range(3):
         cv2.imwrite(str(scene / f"{i}.png"), _photo(i))
-    reconstruct_scene(scene, "sift", out, progress=False)
+    reconstruct_scene(scene, "sift", out, ReconstructOptions(progress=False))
     cv2.imwrite(str(scene / "1.png"), np.zeros((120, 160, 3), np.uint8))  # the burst replaced by a black frame
-    reconstruct_scene(scene, "sift", out, progress=False)
+    reconstruct_scene(scene, "sift", out, ReconstructOptions(progress=False))
     stored = np.load(out / "features" / "1.npz")
     assert len(stored["keypoints"]) == len(create("sift")(np.zeros((1, 120, 160, 3), np.uint8))["keypoints"]) == 0
     assert read_image(out / "images" / "1.png").max() == 0

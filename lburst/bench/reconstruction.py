@@ -25,6 +25,7 @@ from typing import Any
 from lburst.io import atomic_path, file_sha1
 from lburst.methods import method_slug
 from lburst.methods.learned import results_key
+from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult
 from lburst.sfm.scene import REFERENCE_FILE
 from lburst.store import files_sha1
 
@@ -62,10 +63,10 @@ def scene_sha1(scene: Path) -> str:
 def run_key(scene: Path, options: dict[str, Any]) -> dict[str, Any]:
     """What a finished run depends on besides the method: the scene's content and the options.
     An automatic ``overlap`` (``None``) is keyed by the value it takes, 10 for a scene and 2 for
-    a recording (as :func:`lburst.sfm.reconstruct.pair_plan` sets it), so a scene's finished runs
+    a recording (as :func:`lburst.sfm.pairs.pair_plan` sets it), so a scene's finished runs
     from when ``--overlap`` defaulted to 10 are still the same run."""
     if "overlap" in options and options["overlap"] is None:
-        from lburst.sfm.reconstruct import RECORDING_OVERLAP, SCENE_OVERLAP
+        from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
         from lburst.sources import is_recording
 
         recording = is_recording(scene, options.get("recording"))
@@ -82,7 +83,8 @@ def _stored_key(out: Path) -> dict[str, Any] | None:
 
 def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
     """The table row of one method on one scene (from ``result.json`` when already done)."""
-    from lburst.sfm.reconstruct import RESULT_FILE, ReconstructionError, ReconstructionResult, reconstruct_scene
+    from lburst.sfm.options import ReconstructOptions
+    from lburst.sfm.reconstruct import reconstruct_scene
 
     row: dict[str, Any] = {"method": spec, "scene": scene.name, "out": str(out)}
     done = out / RESULT_FILE
@@ -98,21 +100,26 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
             reference = scene / REFERENCE_FILE
             if (
                 reference.is_file()
-                and not previous.error
+                and not previous.failed
                 and previous.metrics.get("reference_sha1") != file_sha1(reference)
             ):
                 evaluate(previous, reference)  # reference added or remade since
-            return {**row, **previous.metrics, "registered": len(previous.registered), "error": previous.error}
+            return {**row, **previous.metrics, "registered": len(previous.registered), "error": colmap_error(previous)}
     try:
-        result = reconstruct_scene(scene, spec, out, **options)
+        result = reconstruct_scene(scene, spec, out, ReconstructOptions(**options))
         with atomic_path(out / KEY_FILE) as tmp:
             tmp.write_text(json.dumps(key, indent=1))
     except ReconstructionError as err:
         print(f"{spec} on {scene}: {err}", file=sys.stderr)
         return {**row, "converged": 0.0, "error": str(err)}
-    if result.error:
+    if result.failed:
         print(f"{spec} on {scene}: {result.error}", file=sys.stderr)
-    return {**row, **result.metrics, "registered": len(result.registered), "error": result.error}
+    return {**row, **result.metrics, "registered": len(result.registered), "error": colmap_error(result)}
+
+
+def colmap_error(result: ReconstructionResult) -> str | None:
+    """The table's ``error``: why COLMAP failed (a recording that stopped early but made a model is no error there)."""
+    return result.error if result.failed else None
 
 
 def run_benchmark(

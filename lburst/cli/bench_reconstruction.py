@@ -9,7 +9,7 @@ from lburst.bench.reconstruction import run_benchmark
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
 from lburst.io import atomic_path
-from lburst.sfm.reconstruct import RECORDING_OVERLAP, SCENE_OVERLAP
+from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 from lburst.cli.numbers import integer, real
 from lburst.cli.options import add_matcher_argument, add_recording_arguments, recording_options
 from lburst.errors import RunFailed
-from lburst.sfm.reconstruct import (
+from lburst.sfm.options import (
     AUTO_EXHAUSTIVE_MAX,
     LOOP_FRACTION,
     RECORDING_ABS_POSE_INLIERS,
@@ -17,8 +17,10 @@ from lburst.sfm.reconstruct import (
     RECORDING_OVERLAP,
     RECORDING_RETRIEVAL,
     SCENE_OVERLAP,
-    reconstruct_scene,
+    ReconstructOptions,
 )
+from lburst.sfm.reconstruct import reconstruct_scene
+from lburst.sfm.result import Status
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -122,29 +124,31 @@ def main(args: argparse.Namespace) -> int:
         args.scene,
         args.method,
         args.out,
-        pairs=args.pairs,
-        overlap=args.overlap,
-        fallback_exhaustive=args.fallback_exhaustive,
-        mapper=args.mapper,
-        camera=args.camera,
-        camera_model=args.camera_model,
-        single_camera=args.single_camera,
-        fix_intrinsics=args.fix_intrinsics,
-        num_threads=args.threads,
-        seed=args.seed,
-        matcher=args.matcher,
-        retrieval=args.retrieval,
-        near=args.near,
-        loop_fraction=args.loop_fraction,
-        abs_pose_inliers=args.abs_pose_inliers,
-        mapper_threads=args.mapper_threads,
-        recording=recording_options(args),
-        features=args.features,
+        ReconstructOptions(
+            pairs=args.pairs,
+            overlap=args.overlap,
+            fallback_exhaustive=args.fallback_exhaustive,
+            mapper=args.mapper,
+            camera=args.camera,
+            camera_model=args.camera_model,
+            single_camera=args.single_camera,
+            fix_intrinsics=args.fix_intrinsics,
+            num_threads=args.threads,
+            seed=args.seed,
+            matcher=args.matcher,
+            retrieval=args.retrieval,
+            near=args.near,
+            loop_fraction=args.loop_fraction,
+            abs_pose_inliers=args.abs_pose_inliers,
+            mapper_threads=args.mapper_threads,
+            recording=recording_options(args),
+            features=args.features,
+        ),
     )
     from lburst.sfm.metrics import markdown_table
 
     print(markdown_table([{"method": result.method, "scene": Path(result.scene).name, **result.metrics}]))
-    if result.error:
+    if result.status == Status.COLMAP_FAILED:
         raise RunFailed(result.error)
     if not result.converged:
         raise RunFailed(f"no model: COLMAP registered no images of {args.scene}")
@@ -154,6 +158,6 @@ def main(args: argparse.Namespace) -> int:
     )
     if result.metrics.get("camera"):
         print(f"camera: {result.metrics['camera']}")
-    if result.source_error:
-        raise RunFailed(f"{result.source_error} (the {len(result.names)} keyframes before it were used)")
+    if result.status == Status.PARTIAL:
+        raise RunFailed(f"{result.error} (the {len(result.names)} keyframes before it were used)")
     return 0

@@ -65,9 +65,11 @@ def pinhole(camera: dict) -> dict:
 
 def make_reference(photos: Path, scene_dir: Path, progress: bool = True, **options) -> Reference | None:
     """Reconstruct the clean photos with SIFT and save ``scene_dir/reference.json``; ``None`` if nothing registered."""
+    from lburst.sfm.options import ReconstructOptions
     from lburst.sfm.reconstruct import reconstruct_scene
 
-    result = reconstruct_scene(photos, REFERENCE_METHOD, scene_dir / REFERENCE_DIR, progress=progress, **options)
+    opts = ReconstructOptions(progress=progress, **options)
+    result = reconstruct_scene(photos, REFERENCE_METHOD, scene_dir / REFERENCE_DIR, opts)
     with atomic_path(scene_dir / REFERENCE_DIR / REFERENCE_OPTIONS_FILE) as tmp:
         tmp.write_text(json.dumps(non_default_options(options), indent=1, sort_keys=True))
     if not result.registered:
@@ -84,7 +86,7 @@ def non_default_options(options: dict) -> dict:
     """``options`` without the fields equal to :class:`lburst.sfm.ReconstructOptions`' defaults."""
     from dataclasses import MISSING, fields
 
-    from lburst.sfm.reconstruct import ReconstructOptions
+    from lburst.sfm.options import ReconstructOptions
 
     defaults = {f.name: f.default for f in fields(ReconstructOptions) if f.default is not MISSING}
     return {k: v for k, v in options.items() if k not in defaults or defaults[k] != v}

@@ -1,7 +1,8 @@
 """Bursts to a 3D model with COLMAP (pycolmap), and the paper's reconstruction metrics.
 
 Public API: :func:`reconstruct_scene` (one scene, one feature method) returning a
-:class:`ReconstructionResult`, and :func:`evaluate_against_reference` (trajectory
+:class:`ReconstructionResult` (its :class:`Status` and ``error``) and taking
+:class:`ReconstructOptions`, and :func:`evaluate_against_reference` (trajectory
 errors and match precision against a scene's ``reference.json``).  They are imported on
 first use, so that the COLMAP child (``python -m lburst.cli.colmap_job``) and
 :mod:`lburst.sfm.poses` import no torch.
@@ -12,8 +13,10 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
-    "ReconstructionError": "lburst.sfm.reconstruct",
-    "ReconstructionResult": "lburst.sfm.reconstruct",
+    "ReconstructOptions": "lburst.sfm.options",
+    "ReconstructionError": "lburst.sfm.result",
+    "ReconstructionResult": "lburst.sfm.result",
+    "Status": "lburst.sfm.result",
     "reconstruct_scene": "lburst.sfm.reconstruct",
     "evaluate_against_reference": "lburst.sfm.metrics",
 }

@@ -29,16 +29,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from lburst.io import atomic_path, to_uint8, write_features_h5, write_image
+from lburst.sfm.result import ReconstructionResult, Status
 from lburst.tum import write_tum
-
-if TYPE_CHECKING:
-    from lburst.sfm.reconstruct import ReconstructionResult
-
 
 IMAGES = "images"  # OUT/images: the common frames, named as in features.h5 and COLMAP
 
@@ -63,12 +59,22 @@ def write_scene_times(out: Path, scene: str, names: list[str]) -> None:
         tmp.write_text(json.dumps(data, indent=1))
 
 
+def copy_reference(reference: Path | None, path: Path) -> None:
+    """A scene's ``reference.json`` copied to ``path`` (``OUT/reference.json``, where a
+    recording's is written), or none there when the scene has none."""
+    if reference is None:
+        path.unlink(missing_ok=True)
+        return
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(Path(reference).read_bytes())
+
+
 def keyframe_times(out: Path) -> dict[str, float]:
     data = json.loads((out / "keyframes.json").read_text())
     return {k["name"]: float(k["time"]) for k in data["keyframes"]}
 
 
-def write_reference_tum(result: "ReconstructionResult", times: dict[str, float], path: Path) -> Path | None:
+def write_reference_tum(result: ReconstructionResult, times: dict[str, float], path: Path) -> Path | None:
     """The reference poses (``OUT/reference.json``) of the scene's images as a TUM file, timed as
     ``trajectory.tum``; ``None`` (and no file) without a reference."""
     from lburst.sfm.reference import Reference
@@ -87,7 +93,7 @@ def write_reference_tum(result: "ReconstructionResult", times: dict[str, float],
     )
 
 
-def write_trajectory(result: "ReconstructionResult", times: dict[str, float], path: Path) -> Path:
+def write_trajectory(result: ReconstructionResult, times: dict[str, float], path: Path) -> Path:
     names = [n for n in result.registered if n in times]
     return write_tum(
         path,
@@ -135,7 +141,7 @@ def write_hloc(
         tmp.write_text("".join(f"{files[a]} {files[b]}\n" for a, b in pairs))
 
 
-def _plot_trajectory(result: "ReconstructionResult", path: Path) -> None:
+def _plot_trajectory(result: ReconstructionResult, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -196,7 +202,7 @@ def _plot_registration(names: list[str], points: dict[str, int], path: Path) -> 
     plt.close(fig)
 
 
-def write_report(result: "ReconstructionResult", times: dict[str, float], path: Path) -> None:
+def write_report(result: ReconstructionResult, times: dict[str, float], path: Path) -> None:
     from lburst.sfm.metrics import markdown_table
 
     out = Path(result.out_dir)
@@ -223,10 +229,9 @@ def write_report(result: "ReconstructionResult", times: dict[str, float], path: 
             f"The first and last keyframes share {m['first_last_points3D']} 3D points of the model "
             "(tracks seen in both, directly or through the keyframes between)."
         )
-    if result.source_error:
-        lines.append(f"Reading the recording stopped early: {result.source_error}")
     if result.error:
-        lines.append(f"COLMAP failed: {result.error}")
+        failed = result.status == Status.COLMAP_FAILED
+        lines.append(f"{'COLMAP failed' if failed else 'Reading the recording stopped early'}: {result.error}")
     lines += [
         "",
         markdown_table([{"method": result.method, "scene": Path(result.scene).name, **m}]),
@@ -247,7 +252,7 @@ def write_report(result: "ReconstructionResult", times: dict[str, float], path: 
 
 
 def write_outputs(
-    result: "ReconstructionResult",
+    result: ReconstructionResult,
     features: list[dict],
     pairs: list[tuple[int, int]],
     matches: list[np.ndarray],

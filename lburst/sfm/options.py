@@ -1,0 +1,118 @@
+"""How to reconstruct: :class:`ReconstructOptions`, its enums (:class:`Pairs`, :class:`Camera`,
+:class:`Mapper`) and the measured defaults of a scene and of a recording (docs/defaults.md,
+docs/recordings.md)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+
+from lburst.errors import LBurstValueError
+from lburst.sources import RecordingOptions
+
+AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto' for a scene: exhaustive up to this many images, else sequential
+SCENE_OVERLAP = 10  # sequential pairs of a scene: neighbours on each side
+# A recording (keyframes in time order), pairs='auto': sequential pairs with this overlap,
+# RECORDING_RETRIEVAL retrieval candidates per keyframe, the loop test (ColmapOptions.near)
+# for every pair more than RECORDING_NEAR apart, and registration with at least
+# RECORDING_ABS_POSE_INLIERS 2D-3D inliers; docs/recordings.md has the measurements.
+RECORDING_OVERLAP = 2
+RECORDING_NEAR = 2
+RECORDING_RETRIEVAL = 5
+LOOP_FRACTION = 0.4
+RECORDING_ABS_POSE_INLIERS = 10
+
+
+class Pairs(StrEnum):
+    """Which image pairs to match (:func:`lburst.sfm.pairs.pair_plan`)."""
+
+    AUTO = "auto"  # a scene: exhaustive up to AUTO_EXHAUSTIVE_MAX images, else sequential; a recording: sequential
+    EXHAUSTIVE = "exhaustive"
+    SEQUENTIAL = "sequential"
+
+
+class Camera(StrEnum):
+    """Where the camera prior comes from (:mod:`lburst.sfm.cameras`)."""
+
+    AUTO = "auto"  # the scene's calibration, held fixed; else EXIF; else COLMAP's default
+    DEFAULT = "default"  # COLMAP's default prior
+    REFERENCE = "reference"  # the scene's reference.json cameras
+
+
+class Mapper(StrEnum):
+    INCREMENTAL = "incremental"
+    GLOBAL = "global"
+
+
+def _enum(kind: type[StrEnum], value: str, what: str) -> StrEnum:
+    try:
+        return kind(value)
+    except ValueError:
+        expected = ", ".join(repr(str(m)) for m in kind)
+        raise LBurstValueError(f"unknown {what} {value!r}: expected {expected}") from None
+
+
+@dataclass
+class ReconstructOptions:
+    """How to reconstruct (:mod:`lburst.sfm.reconstruct`'s docstring).
+
+    Attributes:
+        pairs: :class:`Pairs` (or its value): ``'exhaustive'``, ``'sequential'`` (neighbours
+            up to ``overlap`` apart) or ``'auto'`` (a scene: exhaustive up to 20 images, else
+            sequential; a recording: always sequential, :func:`lburst.sfm.pairs.pair_plan`).
+        overlap: sequential pairs' reach; ``None``: 10 for a scene, 2 for a recording.
+        fallback_exhaustive: rerun with every pair when sequential pairs leave images out.
+        camera (:class:`Camera`), camera_model, single_camera, fix_intrinsics: cameras
+            (:mod:`lburst.sfm.cameras`).
+        mapper: :class:`Mapper`, ``'incremental'`` or ``'global'``.
+        num_threads, seed: for COLMAP (repeatable for one thread count).
+        progress: tqdm bars, and a line on stderr per stage of matching and COLMAP with its seconds.
+        extra: further :class:`lburst.sfm.colmap.ColmapOptions` fields, e.g. ``max_num_trials``.
+        retrieval: with sequential pairs, also each image's this many most similar images
+            farther apart (loop-closure candidates, :mod:`lburst.sfm.retrieval`); ``None``:
+            5 for a recording, 0 for a scene.
+        near: pairs more than this many images apart must also pass the loop test after
+            COLMAP's verification (:func:`lburst.sfm.colmap.loop_test`); ``None``: 2 (at
+            most the overlap) for a recording, 0 (no test) for a scene.
+        loop_fraction: the loop test's fraction of the adjacent pairs' median inlier count.
+        abs_pose_inliers: fewest 2D-3D inliers to register an image (incremental mapper);
+            ``None``: 10 for a recording (its camera is one, usually calibrated, and the
+            keyframes of a dark recording have few tracks), COLMAP's 30 for a scene.
+        mapper_threads: threads of the mapper; ``None``: 1 for a recording (the only
+            repeatable choice, :class:`lburst.sfm.colmap.ColmapOptions`), ``num_threads``
+            for a scene.
+        recording: :class:`lburst.sources.RecordingOptions` for a scene that is a
+            recording (video or frame folder); ``None``: the defaults.
+        matcher: matcher spec (:mod:`lburst.matching`): ``'mnn'`` (mutual nearest
+            neighbours), ``'ratio'``, ``'ratio,ratio=0.9'``, ...
+        features: a folder that ``lburst extract --out`` wrote: a burst's features stored
+            there under the same key (:func:`lburst.store.key`: same method and burst) are
+            used, not computed again; ``None``: the output folder.
+    """
+
+    pairs: Pairs = Pairs.AUTO
+    overlap: int | None = None
+    fallback_exhaustive: bool = False
+    camera: Camera = Camera.AUTO
+    camera_model: str = "SIMPLE_RADIAL"
+    single_camera: bool | None = None
+    fix_intrinsics: bool = False
+    mapper: Mapper = Mapper.INCREMENTAL
+    num_threads: int = 2
+    seed: int = 0
+    progress: bool = True
+    extra: dict[str, int | float | bool | str] = field(default_factory=dict)
+    retrieval: int | None = None
+    near: int | None = None
+    loop_fraction: float = LOOP_FRACTION
+    abs_pose_inliers: int | None = None
+    mapper_threads: int | None = None
+    recording: RecordingOptions | None = None
+    matcher: str = "mnn"
+    features: str | Path | None = None
+
+    def __post_init__(self) -> None:
+        self.pairs = _enum(Pairs, self.pairs, "pairing")
+        self.camera = _enum(Camera, self.camera, "camera option")
+        self.mapper = _enum(Mapper, self.mapper, "mapper")
