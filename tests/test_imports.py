@@ -139,7 +139,7 @@ def test_the_reconstruct_pipeline_is_split_by_concept():
     their own modules (issue 28)."""
     lines = len((ROOT / "sfm" / "reconstruct.py").read_text(encoding="utf-8").splitlines())
     assert lines <= 300, f"lburst/sfm/reconstruct.py has {lines} lines"
-    for module in ("options", "result", "cameras", "feature_stage", "pairs", "match"):
+    for module in ("options", "inputs", "result", "cameras", "pairs", "match"):
         assert f"lburst.sfm.{module}" in import_graph()["lburst.sfm.reconstruct"]
 
 

@@ -66,11 +66,11 @@ def run_key(scene: Path, options: dict[str, Any]) -> dict[str, Any]:
     a recording (as :func:`lburst.sfm.pairs.pair_plan` sets it), so a scene's finished runs
     from when ``--overlap`` defaulted to 10 are still the same run."""
     if "overlap" in options and options["overlap"] is None:
+        from lburst.sfm.inputs import open_input
         from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
-        from lburst.sources import is_recording
 
-        recording = is_recording(scene, options.get("recording"))
-        options = {**options, "overlap": RECORDING_OVERLAP if recording else SCENE_OVERLAP}
+        time_ordered = open_input(scene, options.get("recording")).time_ordered
+        options = {**options, "overlap": RECORDING_OVERLAP if time_ordered else SCENE_OVERLAP}
     return {"scene": scene_sha1(scene), "options": {k: str(v) for k, v in sorted(options.items()) if k != "progress"}}
 
 

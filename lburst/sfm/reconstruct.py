@@ -1,8 +1,9 @@
 """``lburst reconstruct``: a scene of bursts to a 3D model with COLMAP, and its metrics.
 
 Pipeline (:func:`reconstruct_scene`, options :class:`lburst.sfm.options.ReconstructOptions`):
-features of each burst's common frame with any method spec, and the common frames written as
-``OUT/images/<name>.png`` for COLMAP (:mod:`lburst.sfm.feature_stage`), the cameras
+the input, a scene or a recording, opened once (:mod:`lburst.sfm.inputs`: no other stage
+asks which it is), the features of each burst's common frame with any method spec, and the
+common frames written as ``OUT/images/<name>.png`` for COLMAP (:mod:`lburst.sfm.feature_stage`), the cameras
 (:mod:`lburst.sfm.cameras`), image pairs (exhaustive, or sequential with an overlap for
 trajectories; a recording's keyframes, which are ordered in time, always sequential plus
 retrieval loop candidates, see :func:`lburst.sfm.pairs.pair_plan`), matching
@@ -27,17 +28,17 @@ from pathlib import Path
 import numpy as np
 
 from lburst.io import atomic_path, check_output_outside
-from lburst.sfm.cameras import camera_origin, camera_plan
+from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
-from lburst.sfm.feature_stage import recording_features, scene_features, utf8
+from lburst.sfm.feature_stage import utf8
+from lburst.sfm.inputs import open_input
 from lburst.sfm.match import match_pairs_with_scores, report_stage
 from lburst.sfm.metrics import evaluate_against_reference, scene_metrics
 from lburst.sfm.options import ReconstructOptions
-from lburst.sfm.outputs import copy_reference, write_outputs, write_scene_times
+from lburst.sfm.outputs import write_outputs
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs, pair_plan
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult, Status, ended
-from lburst.sfm.scene import SceneError, list_scene
-from lburst.sources import is_recording
+from lburst.sfm.scene import SceneError
 
 __all__ = [
     "RESULT_FILE",
@@ -64,9 +65,9 @@ def reconstruct_scene(
     is returned as a result with ``status`` :attr:`Status.COLMAP_FAILED` and ``error`` set.
     """
     opts = options or ReconstructOptions()
-    recording = is_recording(scene_dir, opts.recording)
+    source = open_input(scene_dir, opts.recording)  # the one question about the kind of input
     if opts.single_camera is None:  # one camera shot a recording; a scene's photos may come from several
-        opts = replace(opts, single_camera=recording)
+        opts = replace(opts, single_camera=source.one_camera)
     out = Path(out_dir)
     try:
         check_output_outside(out, [scene_dir])
@@ -74,38 +75,30 @@ def reconstruct_scene(
         raise ReconstructionError(str(err)) from None
     if not utf8(str(out.resolve())):
         raise ReconstructionError(f"{out!s}: the output path is not valid UTF-8, which COLMAP cannot use")
-    source_error = None
     try:
-        if recording:
-            scene, features, source_error = recording_features(scene_dir, method_spec, out, opts, extractor)
-            if source_error and len(scene.items) < 2:  # nothing to reconstruct: say why in result.json too
-                out.mkdir(parents=True, exist_ok=True)
-                read = f"{len(scene.items)} keyframe(s) read before the recording stopped; no model"
-                ReconstructionResult(
-                    str(scene_dir),
-                    method_spec,
-                    str(out),
-                    scene.names,
-                    status=Status.SOURCE_FAILED,
-                    error=f"{source_error} ({read})",
-                ).save()
-                raise ReconstructionError(source_error)
-        else:
-            scene = list_scene(scene_dir)
+        scene, features, source_error = source.read(method_spec, out, opts, extractor).unpack()
+        if source_error and len(scene.items) < 2:  # nothing to reconstruct: say why in result.json too
+            out.mkdir(parents=True, exist_ok=True)
+            read = f"{len(scene.items)} keyframe(s) read before the recording stopped; no model"
+            ReconstructionResult(
+                str(scene_dir),
+                method_spec,
+                str(out),
+                scene.names,
+                status=Status.SOURCE_FAILED,
+                error=f"{source_error} ({read})",
+            ).save()
+            raise ReconstructionError(source_error)
         if len(scene.items) < 2:
             raise ReconstructionError(
                 f"{scene_dir}: a reconstruction needs at least 2 images, found {len(scene.items)}"
             )
-        if not recording:
-            features = scene_features(scene, method_spec, out, opts.progress, extractor, opts.features)
-            write_scene_times(out, str(scene_dir), scene.names)
-            copy_reference(scene.reference_path, out / "reference.json")
         sizes = [(int(f["image_size"][0]), int(f["image_size"][1])) for f in features]
         cams = camera_plan(scene, sizes, opts)
     except SceneError as err:
         raise ReconstructionError(str(err)) from err
     n = len(scene.items)
-    plan = pair_plan(n, opts, recording)
+    plan = pair_plan(n, opts, source.time_ordered)
     mode = plan.mode
     pairs = make_pairs(n, mode, plan.overlap)
     loop_candidates: set[tuple[int, int]] = set()
@@ -175,8 +168,8 @@ def reconstruct_scene(
         loop_candidates=len(loop_candidates),
         matcher=opts.matcher,
     )
-    if recording:  # where the intrinsics came from (result.json, report.md)
-        result.metrics["camera"] = camera_origin(scene, cams, opts)
+    if (origin := source.camera_origin(scene, cams, opts)) is not None:
+        result.metrics["camera"] = origin
     if plan.near and not colmap_error:
         result.metrics.update(
             near=plan.near,
