@@ -52,7 +52,12 @@ def test_global_mapper_registers_the_flight(flight, tmp_path):
         flight,
         "sift,max_features=1500",
         tmp_path / "out",
-        ReconstructOptions(progress=False, mapper="global", single_camera=True, extra={"max_num_trials": 2000}),
+        # COLMAP's guess, refined: with the reference camera held fixed (the default for a
+        # synthetic reference) the global mapper put this clean 256x192 flight at 3.8 % ATE
+        # (docs/defaults.md), the incremental one at 0.35 %
+        ReconstructOptions(
+            progress=False, mapper="global", single_camera=True, camera="default", extra={"max_num_trials": 2000}
+        ),
     )
     assert result.error is None and result.registered == result.names
     assert result.metrics["ate_percent"] < 1.0

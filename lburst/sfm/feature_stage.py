@@ -53,6 +53,21 @@ def stored_paths(out: Path, name: str, extracted: Path | None, recording: Path |
     return own + [folder / f"{name}.npz"]
 
 
+class LazyExtractor:
+    """``extractor(burst)``, checked (:func:`lburst.features.check_features`), the method created
+    from ``spec`` on first use only, so a run whose features are all stored never loads a network."""
+
+    def __init__(self, spec: str, extractor=None) -> None:
+        self.spec, self.extractor = spec, extractor
+
+    def __call__(self, burst) -> Features:
+        if self.extractor is None:
+            from lburst.methods import create
+
+            self.extractor = create(self.spec)
+        return check_features(self.extractor(burst))
+
+
 def scene_features(
     scene: Scene, spec: str, out: Path, progress: bool = True, extractor=None, extracted: Path | None = None
 ) -> list[Features]:
@@ -61,6 +76,7 @@ def scene_features(
     (:func:`stored_paths`) are used, not computed again."""
     features = []
     method = store.method_key(spec)
+    extract = LazyExtractor(spec, extractor)
     for item in tqdm(scene.items, desc=f"features {spec}", disable=not progress, leave=False):
         paths = stored_paths(out, item.name, extracted)
         cache = paths[0]
@@ -73,14 +89,7 @@ def scene_features(
         burst = load_item(item)
         write_common_frame(image_path, burst)
         found = cached or store.find(paths[1:], key)
-        if found is None:
-            if extractor is None:
-                from lburst.methods import create
-
-                extractor = create(spec)
-            feats = check_features(extractor(burst))
-        else:
-            feats = found[0]
+        feats = found[0] if found is not None else extract(burst)
         store.save(cache, feats, (burst.shape[2], burst.shape[1]), key, image_sha1=file_sha1(image_path))
         features.append(store.load(cache, key)[0])  # as stored, so a rerun gives the same
     return features
@@ -99,6 +108,7 @@ def recording_features(
     except BurstError as err:
         raise ReconstructionError(str(err)) from err
     method, content = store.method_key(spec), store.recording_content(recording)
+    extract = LazyExtractor(spec, extractor)
 
     def key(name: str) -> dict:
         return store.key(method, path, content, keyframe=name)
@@ -120,14 +130,7 @@ def recording_features(
                     continue
                 write_common_frame(out / IMAGES / f"{keyframe.name}.png", burst)
                 found = store.find(paths(keyframe.name), key(keyframe.name))
-                if found is None:
-                    if extractor is None:
-                        from lburst.methods import create
-
-                        extractor = create(spec)
-                    feats = check_features(extractor(burst))
-                else:
-                    feats = found[0]
+                feats = found[0] if found is not None else extract(burst)
                 store.save(paths(keyframe.name)[0], feats, (burst.shape[2], burst.shape[1]), key(keyframe.name))
         except BurstError as err:
             error = str(err)
