@@ -80,3 +80,17 @@ def test_bad_input_and_options(photo):
         create("orb,colour=1")
     with pytest.raises(ValueError, match="boolean"):
         create("sift,root=maybe")
+
+
+@pytest.mark.parametrize(
+    "spec, named",
+    [
+        ("orb,max_features=-1", "orb max_features"),
+        ("orb,max_features=0", "orb max_features"),
+        ("sift,max_features=-1", "sift max_features"),
+        ("sift,contrast_threshold=0", "sift contrast_threshold"),
+    ],
+)
+def test_counts_opencv_refuses_are_refused_by_name_before_opencv(spec, named):
+    with pytest.raises(ValueError, match=named):
+        create(spec)

@@ -19,6 +19,7 @@ import numpy as np
 from lburst.features import Features, empty_features, image_size
 from lburst.frames import check_burst, to_gray8
 from lburst.methods import register
+from lburst.numbers import check_integer, check_real
 
 
 def keypoints_to_features(
@@ -77,6 +78,10 @@ class SiftOptions:
     root: bool = False
     contrast_threshold: float = 0.04
 
+    def __post_init__(self) -> None:
+        check_integer(self.max_features, "sift max_features (0: all)", 0)
+        check_real(self.contrast_threshold, "sift contrast_threshold", 0, low_open=True)
+
 
 @register("sift", SiftOptions)
 def sift(arg: None, options: SiftOptions) -> OpenCVExtractor:
@@ -90,6 +95,9 @@ class OrbOptions:
     """OpenCV's ORB: ``max_features`` kept."""
 
     max_features: int = 5000
+
+    def __post_init__(self) -> None:
+        check_integer(self.max_features, "orb max_features", 1)
 
 
 @register("orb", OrbOptions)
