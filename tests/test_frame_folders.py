@@ -113,15 +113,14 @@ def test_reconstruct_takes_a_frame_folder_without_meta_json_and_says_the_camera_
 
 
 def test_the_readme_hloc_snippet_reads_a_reconstruction_as_hloc_does(estimated):
-    """README "Your own data": the h5py lines that read features.h5 / matches.h5 as hloc.utils.io
+    """docs/your_data.md (linked from the README's "Your own data"): the h5py lines that read features.h5 / matches.h5 as hloc.utils.io
     does (a group per image with keypoints, descriptors (D, K), scores; a group per pair
     "name0/name1" with matches0 and matching_scores0), run on a reconstruction's output."""
     out, _, _ = estimated
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    section = readme[readme.index("## Your own data") : readme.index("## Python API")]
+    section = (Path(__file__).parents[1] / "docs" / "your_data.md").read_text()
     (code,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
     scope: dict = {}
-    exec(compile(code.replace('Path("night_video")', f"Path({str(out)!r})"), "README.md", "exec"), scope)
+    exec(compile(code.replace('Path("night_video")', f"Path({str(out)!r})"), "your_data.md", "exec"), scope)
     name0, name1 = scope["name0"], scope["name1"]
     assert (out / "images" / name0).is_file() and (out / "images" / name1).is_file()
     kp0, kp1, desc0, pairs = scope["kp0"], scope["kp1"], scope["desc0"], scope["pairs"]
