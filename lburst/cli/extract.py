@@ -146,7 +146,8 @@ def write_cut(folder: Path, path: Path, options, names: list[str]) -> None:
     cut = {"recording": str(path), "options": options.signature(), "keyframes": names}
     with atomic_path(folder / CUT_FILE) as tmp:
         tmp.write_text(json.dumps(cut, indent=1))
-    stale = [p for p in folder.glob("*.npz") if p.stem not in set(names) and store.read_meta(p) is not None]
+    listed = set(names)
+    stale = [p for p in folder.glob("*.npz") if p.stem not in listed and store.read_meta(p) is not None]
     if stale:
         tqdm.write(
             f"{path}: {len(stale)} keyframes of an earlier cut stay in {folder}; {CUT_FILE} and features.h5 "
@@ -159,21 +160,24 @@ def features_in_folder(out: Path) -> dict[str, Path]:
     ``NAME.npz``: group ``NAME.png``, a recording's ``REC/KEYFRAME.npz``: ``REC/KEYFRAME.png``, the
     names of their images in ``out/images``); files without lburst's metadata are left out, and so is
     the features cache of a ``lburst reconstruct --out`` into the same folder (``out/features``)."""
-    found = {}
+    found, cuts = {}, {}
     for npz in sorted(list(out.glob("*.npz")) + list(out.glob("*/*.npz"))):
-        if npz.parent == out / "features" and not (npz.parent / CUT_FILE).is_file():
+        if npz.parent not in cuts:
+            cuts[npz.parent] = this_cut(npz.parent)  # one read of cut.json per folder
+        cut = cuts[npz.parent]
+        if npz.parent == out / "features" and cut is None:
             continue
-        if store.read_meta(npz) is not None and npz.stem in this_cut(npz.parent, npz.stem):
+        if (cut is None or npz.stem in cut) and store.read_meta(npz) is not None:
             found[npz.relative_to(out).with_suffix(".png").as_posix()] = npz
     return found
 
 
-def this_cut(folder: Path, name: str) -> set[str] | tuple[str]:
-    """The keyframe names of ``folder``'s last cut (its ``cut.json``), or ``(name,)`` when it has none."""
+def this_cut(folder: Path) -> set[str] | None:
+    """The keyframe names of ``folder``'s last cut (its ``cut.json``), or ``None`` when it has none."""
     try:
         return set(json.loads((folder / CUT_FILE).read_text())["keyframes"])
     except (OSError, ValueError, KeyError, TypeError):
-        return (name,)
+        return None
 
 
 def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:

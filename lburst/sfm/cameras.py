@@ -89,7 +89,7 @@ class CameraPlan:
 def camera_plan(scene: Scene, sizes: list[tuple[int, int]], options: ReconstructOptions) -> CameraPlan:
     """:func:`scene_cameras`, then a recording's ``meta.json`` camera, or a ``reference.json``
     that is a calibration, is the calibration: one camera, held fixed (refining it from dark
-    frames moved the simulated flight's ATE from 0.133 to 1.17 m, docs/recordings.md)."""
+    frames moved the simulated flight's ATE from 0.133 to 1.17 m, docs/defaults.md)."""
     cameras, camera_of_image = scene_cameras(scene, sizes, options)
     calibrated = options.camera == Camera.AUTO and (scene.camera is not None or calibrated_reference(scene))
     if calibrated and all(cam == cameras[0] for cam in cameras):

@@ -47,10 +47,15 @@ def activations_per_pixel(net: torch.nn.Module, channels: int, side: int = 64) -
     return total / side**2
 
 
+def pair_bytes(net: torch.nn.Module, channels: int, crop: int) -> float:
+    """Estimated memory that one pair of ``crop`` px bursts adds to a training step."""
+    per_pixel = activations_per_pixel(net, channels) * 4 * KEPT_ACTIVATIONS + LOSS_BYTES_PER_PIXEL
+    return 2 * crop**2 * per_pixel
+
+
 def step_bytes(net: torch.nn.Module, channels: int, batch_size: int, crop: int) -> int:
     """Estimated peak memory of one training step of ``batch_size`` pairs of ``crop`` px bursts."""
-    per_pixel = activations_per_pixel(net, channels) * 4 * KEPT_ACTIVATIONS + LOSS_BYTES_PER_PIXEL
-    return int(BASE_BYTES + 2 * batch_size * crop**2 * per_pixel)
+    return int(BASE_BYTES + batch_size * pair_bytes(net, channels, crop))
 
 
 def check_step_memory(
@@ -61,11 +66,11 @@ def check_step_memory(
     limit = memory_limit_bytes() if limit is None else limit
     if limit is None:
         return
-    need = step_bytes(net, channels, batch_size, crop)
+    one = pair_bytes(net, channels, crop)  # one forward pass with hooks, for both figures
+    need = BASE_BYTES + batch_size * one
     if need <= limit:
         return
-    one = step_bytes(net, channels, 1, crop) - BASE_BYTES
-    fits = max(0, (limit - BASE_BYTES) // one)
+    fits = max(0, int((limit - BASE_BYTES) // one))
     raise LBurstValueError(
         f"--batch-size {batch_size}: a training step of {batch_size} pairs of {crop}-px bursts needs about "
         f"{need / 2**30:.1f} GiB, more than half of this machine's memory ({limit / 2**30:.1f} GiB); "
