@@ -21,12 +21,12 @@ _EXPORTS = {
     "save_checkpoint": "lburst.model.network",
     "LBurstError": "lburst.errors",
     "LBurstValueError": "lburst.errors",
-    "BurstError": "lburst.io",
-    "load_burst": "lburst.io",
-    "save_burst": "lburst.io",
+    "BurstError": "lburst.burst.io",
+    "load_burst": "lburst.burst.io",
+    "save_burst": "lburst.burst.io",
     "simulate_burst": "lburst.simulate",
 }
-_MODULES = ("methods", "matching", "noise", "simulate", "io", "match", "model")
+_MODULES = ("methods", "matching", "noise", "simulate", "burst", "match", "model")
 
 __all__ = sorted(_EXPORTS) + list(_MODULES)
 

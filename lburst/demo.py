@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.io import atomic_path, load_burst, read_features_npz
+from lburst.burst.io import atomic_path, load_burst, read_features_npz
 from lburst.viz import new_figure
 
 

@@ -19,8 +19,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from lburst.burst.motion import BurstMotion
 from lburst.errors import LBurstValueError
-from lburst.motion import BurstMotion
 from lburst.noise import NoiseModel
 
 _BORDERS = {"reflect": cv2.BORDER_REFLECT_101, "replicate": cv2.BORDER_REPLICATE, "constant": cv2.BORDER_CONSTANT}
@@ -64,7 +64,7 @@ def simulate_burst(
     """A robotic burst ``(N, H, W, 3)`` of ``image`` (H, W, 3) or (H, W), uint8 or uint16.
 
     ``motion`` is the per-frame translation (dx, dy) in pixels, one (dx, dy) per
-    frame (absolute offsets, the middle one (0, 0)), or a :class:`lburst.motion.BurstMotion`
+    frame (absolute offsets, the middle one (0, 0)), or a :class:`lburst.burst.motion.BurstMotion`
     (translation, rotation, zoom and smooth non-uniform flow).  Returns the image's dtype.
     """
     image = np.asarray(image)

@@ -1,7 +1,7 @@
 """The features store: one ``.npz`` per burst that records what made it.
 
 Used by ``lburst extract``, ``lburst reconstruct`` (and so by the reconstruction
-benchmark) and the homography benchmark.  Each file has the layout of :func:`lburst.io.write_features_npz` plus
+benchmark) and the homography benchmark.  Each file has the layout of :func:`lburst.burst.io.write_features_npz` plus
 ``_meta``, a JSON object whose ``key`` says what the features depend on.  Every caller
 gets its key from :func:`key`, the one key builder, so that the same burst by the same
 method has the same key wherever it was computed (``lburst extract`` of a recording and
@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from lburst.burst.io import read_features_npz, write_features_npz
 from lburst.features import Features, check_features
-from lburst.io import read_features_npz, write_features_npz
 
 
 def files_sha1(files: list[Path] | tuple[Path, ...], root: Path | None = None) -> str:
@@ -67,7 +67,7 @@ def content_sha1(path: str | Path) -> str:
 def recording_content(recording: Any) -> str:
     """What the features of a recording's keyframes depend on besides the method: the SHA-1 of
     its whole content (a video's bytes, or every frame file's name and bytes, :func:`files_sha1`)
-    and how it is cut into keyframe bursts (:meth:`lburst.sources.RecordingOptions.signature`).
+    and how it is cut into keyframe bursts (:meth:`lburst.burst.sources.RecordingOptions.signature`).
 
     Every byte counts, so a change anywhere (frames re-encoded in the middle of a video, a
     frame file rewritten at the same size) computes the keyframes again.  Sampling the

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lburst.burst.io import atomic_path
 from lburst.errors import LBurstValueError
-from lburst.io import atomic_path
 
 Pose = tuple[np.ndarray, np.ndarray]  # world-to-camera (R (3, 3), t (3,))
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.burst.io import atomic_path, to_uint8
 from lburst.extras import require
-from lburst.io import atomic_path, to_uint8
 
 
 def new_figure(figsize: tuple[float, float]):

@@ -1,5 +1,5 @@
 """Burst alignment speed and accuracy: seconds per 1024x768 5-frame burst and shift error
-against the true shifts, per method of :func:`lburst.align.estimate_shifts`.
+against the true shifts, per method of :func:`lburst.burst.align.estimate_shifts`.
 
 Bursts are simulated (:func:`lburst.simulate.simulate_burst`) from textured photos
 resized to ``--size`` (skimage's astronaut, coffee and chelsea, plus ``--photos`` photos
@@ -9,13 +9,13 @@ drawn from ``$LBURST_SHARED/data/train`` when that folder exists), each moving a
 every noise level of ``--noise`` (Gaussian std on 0..255, or a noise spec of
 :func:`lburst.noise.noise_from_spec` such as ``lowlight:night``).
 
-Per method: the time of :func:`lburst.align.align_burst` (shift estimation with
+Per method: the time of :func:`lburst.burst.align.align_burst` (shift estimation with
 ``--motion``, then the warp), median over every burst run ``--repeats`` times with
 ``--threads`` OpenCV threads, as wall-clock seconds (split into estimate and warp) and as
 the process's CPU seconds (less sensitive to other processes on a busy machine); and the shift error ``|estimated - true|`` (px, Euclidean,
 every frame but the common one) per noise level: mean, 95th percentile and max.
 ``simulate_burst`` puts the image content at ``(x, y)`` at ``(x + t u, y + t v)`` in
-frame ``t``, which is the shift ``t (u, v)`` of :mod:`lburst.align`'s convention.
+frame ``t``, which is the shift ``t (u, v)`` of :mod:`lburst.burst.align`'s convention.
 The last column is the worst excess of the method's mean error over ``ecc``'s.
 
     taskset -c 0 python scripts/align_speed.py --out outputs/align_speed.json
@@ -34,7 +34,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from lburst.align import METHODS, align_burst, estimate_shifts
+from lburst.burst.align import METHODS, align_burst, estimate_shifts
 from lburst.model.precision import cpu_name
 from lburst.noise import GaussianNoise, noise_from_spec
 from lburst.paths import shared_dir

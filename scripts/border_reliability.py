@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lburst.io import load_burst
+from lburst.burst.io import load_burst
 from lburst.model.extractor import LBurst
 
 RINGS = ((0, 8), (8, 16), (16, 32), (32, 64), (64, None))

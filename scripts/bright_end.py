@@ -1,4 +1,4 @@
-"""How bright the training photos' bright end is: the default ``target`` of :class:`lburst.raw.Normalisation`.
+"""How bright the training photos' bright end is: the default ``target`` of :class:`lburst.burst.raw.Normalisation`.
 
 For every ``--every``-th photo of a training folder, the statistic the RAW normalisation
 maps to its target: the ``--percentile``-th percentile of the luminance (Rec. 709 weights,
@@ -21,8 +21,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from lburst.io import atomic_path
-from lburst.raw import LUMA, binned
+from lburst.burst.io import atomic_path
+from lburst.burst.raw import LUMA, binned
 
 SUFFIXES = {".jpg", ".jpeg", ".png"}
 

@@ -23,7 +23,7 @@ import time
 import cv2
 import numpy as np
 
-from lburst.io import atomic_path
+from lburst.burst.io import atomic_path
 from lburst.methods.buff import Buff, BuffConfig
 
 

@@ -9,7 +9,7 @@ The other paths: ``plain`` (the network run as the published code runs it: NCHW,
 128-D maps at every level), ``fast`` (lburst's default, same features), ``bf16``
 (bfloat16 autocast of the backbone, heads in fp32) and ``onnx`` (the fast network
 exported by ``lburst export onnx``, run by ONNX Runtime), and ``align`` (only the burst
-alignment, :func:`lburst.align.align_burst`, which ``LBurst`` runs before the network for
+alignment, :func:`lburst.burst.align.align_burst`, which ``LBurst`` runs before the network for
 weights that ask for it, as the shipped ``lburst-b5``: add it to a network path's time).
 The network paths run without alignment.  Each path runs in its own
 process so its peak memory can be read; times are medians of ``--repeats`` runs after
@@ -55,7 +55,7 @@ def _make_burst(size: tuple[int, int], frames: int) -> np.ndarray:
 
 
 def run_child(path: str, args: argparse.Namespace) -> dict:
-    from lburst.align import align_burst
+    from lburst.burst.align import align_burst
     from lburst.model.extractor import LBurst
     from lburst.model.network import LBurstNet, NetConfig
 

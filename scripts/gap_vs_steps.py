@@ -27,7 +27,7 @@ from pathlib import Path
 import torch
 
 from lburst.bench.homography import run_homography_benchmark
-from lburst.io import atomic_path
+from lburst.burst.io import atomic_path
 from lburst.methods.learned import weights_file
 from lburst.paths import shared_dir
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from lburst.bench.metrics import project
 from lburst.bench.sequences import read_sequence
-from lburst.io import read_features_npz
+from lburst.burst.io import read_features_npz
 from lburst.matching import create
 
 BINS = (0.0, 0.25, 0.5, 0.75, 1.01)

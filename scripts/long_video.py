@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from lburst.io import atomic_path
+from lburst.burst.io import atomic_path
 
 
 def main() -> None:

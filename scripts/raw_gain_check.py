@@ -1,7 +1,7 @@
 """Keypoints and matches on dark DNG keyframes with and without the RAW normalisation.
 
 For keyframes 64, 96 and 128 of the simulated night flight (bursts of 5 frames), extract
-features from the DNG frames as ``lburst.raw`` delivers them under several
+features from the DNG frames as ``lburst.burst.raw`` delivers them under several
 normalisations (and from the same keyframes of the flight's video), match the pairs
 64-96, 96-128 and 64-128 with mutual nearest neighbours, and count the matches within
 4 px of the true epipolar geometry (the flight's exact poses and camera)::
@@ -21,14 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.burst.raw import LUMA, Normalisation, normalise, read_dng
+from lburst.burst.sources import RecordingOptions, open_recording
 from lburst.matching import create as create_matcher
 from lburst.methods import create
 from lburst.noise import noise_from_spec
-from lburst.raw import LUMA, Normalisation, normalise, read_dng
 from lburst.scenes.flight_recording import BLACK_LEVEL, camera
 from lburst.scenes.night_flight import NightFlightConfig, camera_pose
 from lburst.sfm.metrics import epipolar_distances
-from lburst.sources import RecordingOptions, open_recording
 
 KEYS = (64, 96, 128)
 PAIRS = ((64, 96), (96, 128), (64, 128))
@@ -48,7 +48,7 @@ def main() -> None:
         return np.stack([read_dng(args.dng / f"frame_{max(j, 0):06d}.dng") for j in indices])
 
     dng = {k: frames(range(k - 2, k + 3)) for k in KEYS}
-    first = frames([0, 0, 0, 1, 2])  # the recording's first burst, as lburst.sources fills it
+    first = frames([0, 0, 0, 1, 2])  # the recording's first burst, as lburst.burst.sources fills it
     sensor = noise_from_spec(cfg.noise)  # the scene's white in linear units: its counts over the ADC's range
     white = sensor.photons * sensor.quantum_efficiency / sensor.gain_e_per_adu / (2**sensor.adc_bits - 1 - BLACK_LEVEL)
     single = float(np.percentile(np.asarray(first, np.float32) / 65535 @ LUMA, 99.5))

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.io import read_features_npz
+from lburst.burst.io import read_features_npz
 
 BINS = (0.0, 0.25, 0.5, 0.75, 1.01)
 GRID = (8, 6)

@@ -152,7 +152,7 @@ def raw_maps(name: str, model, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
 
 
 def run(args: argparse.Namespace, threads: int) -> list[dict]:
-    from lburst.align import align_burst
+    from lburst.burst.align import align_burst
     from lburst.model.network import normalize_burst
 
     torch.set_num_threads(threads)

@@ -22,7 +22,7 @@ import numpy as np
 
 
 def cross_line_pairs(survey: Path, run: Path) -> dict:
-    from lburst.io import read_features_npz
+    from lburst.burst.io import read_features_npz
     from lburst.scenes.reference import Reference
     from lburst.sfm.metrics import epipolar_distances
 

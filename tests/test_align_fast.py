@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from skimage import data
 
-from lburst.align import align_burst, estimate_shifts, pyramid_scales, pyramid_shifts, warp_frame
+from lburst.burst.align import align_burst, estimate_shifts, pyramid_scales, pyramid_shifts, warp_frame
 from lburst.noise import GaussianNoise
 from lburst.simulate import simulate_burst
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from lburst.io import write_image
+from lburst.burst.io import write_image
 from lburst.sfm.cameras import calibrated_reference, scene_cameras
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.scene import list_scene

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
+from lburst.burst.io import atomic_path, remove_stale_temporaries, save_burst
 from lburst.cli import COMMANDS, build_parser, main
-from lburst.io import atomic_path, remove_stale_temporaries, save_burst
 from lburst.model import network as model_module
 from lburst.model import precision as precision_module
 

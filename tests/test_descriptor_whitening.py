@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from lburst.io import write_image
+from lburst.burst.io import write_image
 from lburst.model.extractor import LBurst
 from lburst.model.network import LBurstNet, NetConfig, load_checkpoint, save_checkpoint
 from lburst.train.whitening import descriptor_statistics, whiten_checkpoint, whitening_matrix

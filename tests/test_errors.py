@@ -58,7 +58,7 @@ def test_every_exception_class_of_lburst_derives_from_lburst_error():
 @pytest.mark.parametrize(
     "name, builtin",
     [
-        ("lburst.io.BurstError", ValueError),
+        ("lburst.burst.io.BurstError", ValueError),
         ("lburst.model.network.CheckpointError", ValueError),
         ("lburst.sfm.scene.SceneError", ValueError),
         ("lburst.sfm.result.ReconstructionError", RuntimeError),

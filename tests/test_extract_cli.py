@@ -4,8 +4,8 @@ import cv2
 import numpy as np
 import skimage.data
 
+from lburst.burst.io import save_burst
 from lburst.cli import main
-from lburst.io import save_burst
 from lburst.simulate import simulate_burst
 
 

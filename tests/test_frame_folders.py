@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lburst.burst.io import write_image
+from lburst.burst.sources import RecordingOptions, is_recording
 from lburst.cli import main
 from lburst.cli.options import recording_options
-from lburst.io import write_image
-from lburst.sources import RecordingOptions, is_recording
 
 
 def _frames(folder, n, size=(96, 128), seed=0):

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from lburst.io import BurstError, load_burst
+from lburst.burst.io import BurstError, load_burst
 from lburst.model.extractor import LBurst
 from lburst.model.network import LBurstNet, NetConfig
 

@@ -77,7 +77,7 @@ def check_as_hloc_reads(out, images=None) -> list[str]:
     """Read ``out`` as hloc's ``reconstruction.main`` does (every image of ``pairs.txt``, or of
     ``features.h5``, from ``out/images`` by its name, its keypoints from ``features.h5`` by the
     same name, each pair's matches from ``matches.h5``); returns the image names."""
-    from lburst.io import read_image
+    from lburst.burst.io import read_image
 
     images = images or out / "images"
     with h5py.File(out / "features.h5") as f:

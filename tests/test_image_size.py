@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from lburst import store
+from lburst.burst.io import read_features_npz, write_features_h5, write_features_npz
 from lburst.features import check_features, concatenate, select, spread_top_k
-from lburst.io import read_features_npz, write_features_h5, write_features_npz
 from lburst.methods import create
 from lburst.methods.learned import LearnedExtractor
 from lburst.model.extractor import LBurst

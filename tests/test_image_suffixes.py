@@ -1,14 +1,14 @@
-"""One list of image file suffixes (:data:`lburst.io.IMAGE_SUFFIXES`): a ``.webp`` frame is a
+"""One list of image file suffixes (:data:`lburst.burst.io.IMAGE_SUFFIXES`): a ``.webp`` frame is a
 frame in a burst, in a scene and in a recording's frame folder alike."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from lburst import io
+from lburst.burst import io
+from lburst.burst.sources import RecordingOptions, is_recording
 from lburst.model import runtimes
 from lburst.sfm import scene as scene_module
-from lburst.sources import RecordingOptions, is_recording
 from lburst.train import data
 
 

@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
-from lburst.io import BurstError, load_burst, read_features_npz, save_burst, write_features_h5, write_features_npz
+from lburst.burst.io import BurstError, load_burst, read_features_npz, save_burst, write_features_h5, write_features_npz
 
 
 def _frames(n, h=24, w=32, dtype=np.uint8, seed=0):
@@ -109,7 +109,7 @@ def test_features_npz_and_h5(tmp_path):
 
 
 def test_atomic_writes_get_the_usual_permissions_and_leave_nothing_on_failure(tmp_path):
-    from lburst.io import atomic_path
+    from lburst.burst.io import atomic_path
 
     old = os.umask(0o022)
     try:

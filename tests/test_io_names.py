@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lburst.io import BurstError, load_burst, opencv_path, save_burst
+from lburst.burst.io import BurstError, load_burst, opencv_path, save_burst
 
 BAD = os.fsdecode(b"bad\xffname")  # a lone surrogate in the str
 RUN_CLI = "import sys; from lburst.cli import main; sys.exit(main(sys.argv[1:]))"
@@ -49,7 +49,7 @@ def test_extract_on_a_folder_whose_name_is_not_utf8_does_not_crash(tmp_path):
 
 
 def test_no_module_hands_opencv_a_raw_path():
-    """Only :mod:`lburst.io` calls OpenCV with a file name, and only through ``opencv_path``."""
+    """Only :mod:`lburst.burst.io` calls OpenCV with a file name, and only through ``opencv_path``."""
     root = Path(__file__).resolve().parents[1] / "lburst"
     raw = re.compile(r"cv2\.(imread|imwrite|imreadmulti|VideoCapture|VideoWriter)\((?!opencv_path\()")
     offenders = [

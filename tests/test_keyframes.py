@@ -4,9 +4,9 @@ import cv2
 import numpy as np
 import pytest
 
-from lburst.io import write_image
-from lburst.keyframes import MotionGate, MotionTracker, apparent_motion, thumbnail
-from lburst.sources import RecordingOptions, open_recording
+from lburst.burst.io import write_image
+from lburst.burst.keyframes import MotionGate, MotionTracker, apparent_motion, thumbnail
+from lburst.burst.sources import RecordingOptions, open_recording
 
 
 def _texture(rng: np.random.Generator, shape=(480, 800)) -> np.ndarray:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from skimage import data
 
-from lburst.align import estimate_shifts, fit_linear
+from lburst.burst.align import estimate_shifts, fit_linear
 from lburst.features import check_features
 from lburst.methods import create
 from lburst.methods.merge import MergeThen, merge_burst
@@ -99,7 +99,7 @@ def test_bad_arguments():
 
 
 def test_align_wrapper_removes_the_burst_motion_before_the_inner_method():
-    from lburst.align import align_burst
+    from lburst.burst.align import align_burst
 
     burst = moving_burst(VELOCITY, 10.0)
     aligned = align_burst(burst)
@@ -122,7 +122,7 @@ def test_align_wrapper_removes_the_burst_motion_before_the_inner_method():
 
 
 def test_weights_trained_on_aligned_bursts_align_them_before_the_network(tmp_path):
-    from lburst.align import align_burst
+    from lburst.burst.align import align_burst
     from lburst.model.extractor import LBurst
     from lburst.model.network import load_checkpoint, save_checkpoint
     from lburst.weights import weights_path
@@ -140,7 +140,7 @@ def test_weights_trained_on_aligned_bursts_align_them_before_the_network(tmp_pat
 
 
 def test_the_python_api_aligns_as_the_method_does(tmp_path):
-    from lburst.align import align_burst
+    from lburst.burst.align import align_burst
     from lburst.model.extractor import LBurst
     from lburst.model.network import load_checkpoint, save_checkpoint
     from lburst.weights import weights_path
@@ -166,7 +166,7 @@ def test_the_shipped_burst_weights_run_on_aligned_bursts():
 
 
 def test_align_wrapper_aligns_weights_that_align_themselves_only_once(tmp_path, monkeypatch):
-    import lburst.align
+    import lburst.burst.align
     import lburst.methods.merge
     import lburst.model.extractor
     from lburst.model.network import load_checkpoint, save_checkpoint
@@ -178,7 +178,7 @@ def test_align_wrapper_aligns_weights_that_align_themselves_only_once(tmp_path, 
 
     def counting(burst, *args, **kwargs):
         calls.append(1)
-        return lburst.align.align_burst(burst, *args, **kwargs)
+        return lburst.burst.align.align_burst(burst, *args, **kwargs)
 
     monkeypatch.setattr(lburst.model.extractor, "align_burst", counting)
     monkeypatch.setattr(lburst.methods.merge, "align_burst", counting)

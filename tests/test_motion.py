@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from lburst.motion import BurstMotion, sample_motion
+from lburst.burst.motion import BurstMotion, sample_motion
 from lburst.simulate import simulate_burst
 
 

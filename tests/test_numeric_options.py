@@ -15,10 +15,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lburst
+from lburst.burst.raw import Normalisation
 from lburst.cli import main
 from lburst.cli.numbers import integer, real
 from lburst.numbers import check_integer, check_real
-from lburst.raw import Normalisation
 
 CLI = Path(lburst.__file__).parent / "cli"
 EXAMPLES = int(os.environ.get("LBURST_HYPOTHESIS_EXAMPLES", "40"))  # `make test-slow`: 2000
@@ -126,7 +126,7 @@ def test_the_api_checks_agree_with_the_cli(value):
     ],
 )
 def test_the_api_checks_recording_options_as_the_cli_does(options, message):
-    from lburst.sources import RecordingOptions
+    from lburst.burst.sources import RecordingOptions
 
     with pytest.raises(ValueError, match=message):
         RecordingOptions(**options)

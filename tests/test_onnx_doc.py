@@ -30,7 +30,7 @@ def exported(tmp_path_factory):
 
 def test_the_docs_onnx_runtime_snippet_matches_lburst_from_onnx(exported, tmp_path):
     from lburst import LBurst, load_burst, simulate_burst
-    from lburst.io import save_burst
+    from lburst.burst.io import save_burst
     from lburst.scenes.textures import load_photo
 
     photo = np.ascontiguousarray(load_photo("astronaut")[100:228, 120:280])  # 160x128

@@ -4,8 +4,8 @@ second run would read the first one's outputs as input)."""
 import numpy as np
 import pytest
 
+from lburst.burst.io import check_output_outside, save_burst
 from lburst.cli import main
-from lburst.io import check_output_outside, save_burst
 from lburst.sfm.reconstruct import ReconstructionError, reconstruct_scene
 
 

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from hypothesis.extra import numpy as hnp  # noqa: E402
 
-from lburst.io import BurstError, load_burst  # noqa: E402
+from lburst.burst.io import BurstError, load_burst  # noqa: E402
 from lburst.model.extractor import LBurst, MultiScaleConfig  # noqa: E402
 from lburst.model.network import LBurstNet, NetConfig  # noqa: E402
 

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
+from lburst.burst.io import read_features_npz
 from lburst.cli import main
-from lburst.io import read_features_npz
 
 pytest.importorskip("av")
 
@@ -81,8 +81,8 @@ def test_extract_reports_a_bad_recording_by_name(tmp_path, capsys):
 
 
 def test_raw_gain_matters_on_dark_dng(recordings):
-    from lburst.raw import Normalisation
-    from lburst.sources import RecordingOptions, open_recording
+    from lburst.burst.raw import Normalisation
+    from lburst.burst.sources import RecordingOptions, open_recording
 
     auto = next(open_recording(recordings / "f_dng", RecordingOptions(burst=3)).bursts())[1]
     linear = next(

@@ -7,11 +7,11 @@ import h5py
 import numpy as np
 import pytest
 
+from lburst.burst.sources import RecordingOptions
 from lburst.scenes.night_flight import NightFlightConfig
 from lburst.sfm import reconstruct_scene
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.result import Status
-from lburst.sources import RecordingOptions
 from lburst.tum import read_tum
 
 pytest.importorskip("av")

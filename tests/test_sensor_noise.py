@@ -263,7 +263,7 @@ def test_every_preset_is_a_valid_model():
 def test_a_sensor_flights_dng_holds_the_sensors_raw_values_and_its_video_the_camera_processing(tmp_path, monkeypatch):
     pytest.importorskip("tifffile")
     rawpy = pytest.importorskip("rawpy")
-    from lburst.raw import read_dng
+    from lburst.burst.raw import read_dng
     from lburst.scenes import flight_recording
     from lburst.scenes.night_flight import NightFlightConfig
 
@@ -291,7 +291,7 @@ def test_simulate_burst_takes_a_sensor_spec(tmp_path, capsys):
     from lburst.cli import main
 
     image = np.random.default_rng(0).integers(0, 255, (48, 64, 3), np.uint8)
-    from lburst.io import write_image
+    from lburst.burst.io import write_image
 
     write_image(tmp_path / "photo.png", image)
     code = main(

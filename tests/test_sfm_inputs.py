@@ -7,8 +7,8 @@ import ast
 from pathlib import Path
 
 import lburst
+from lburst.burst.sources import RecordingOptions
 from lburst.sfm.inputs import RecordingInput, SceneInput, open_input
-from lburst.sources import RecordingOptions
 
 SFM = Path(lburst.__file__).parent / "sfm"
 

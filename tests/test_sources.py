@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from lburst.io import BurstError, write_image
-from lburst.keyframes import MotionGate
-from lburst.raw import Normalisation
-from lburst.sources import Keyframe, RecordingOptions, is_recording, open_recording
+from lburst.burst.io import BurstError, write_image
+from lburst.burst.keyframes import MotionGate
+from lburst.burst.raw import Normalisation
+from lburst.burst.sources import Keyframe, RecordingOptions, is_recording, open_recording
 
 
 def _frame(value: int, size=(24, 32), dtype=np.uint8) -> np.ndarray:
@@ -153,7 +153,7 @@ def test_gain_measures_the_scene_not_the_noise():
 def test_dng_frames_read_linear_and_without_cfa_fail_clearly(tmp_path):
     pytest.importorskip("rawpy")
     tifffile = pytest.importorskip("tifffile")
-    from lburst.raw import read_dng
+    from lburst.burst.raw import read_dng
     from lburst.scenes.dng import mosaic, write_dng
 
     image = np.zeros((32, 48, 3))

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 
 from lburst import store
-from lburst.io import read_image
+from lburst.burst.io import read_image
 from lburst.methods import create
 from lburst.model.network import LBurstNet, NetConfig, save_checkpoint
 from lburst.sfm import reconstruct_scene

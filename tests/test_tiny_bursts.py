@@ -6,9 +6,9 @@ import pytest
 import torch
 
 from lburst import LBurst
-from lburst.align import align_burst, estimate_shifts
+from lburst.burst.align import align_burst, estimate_shifts
+from lburst.burst.io import save_burst
 from lburst.cli import main
-from lburst.io import save_burst
 from lburst.methods import create
 from lburst.model.lite import LiteConfig, LiteNet
 

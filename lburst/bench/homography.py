@@ -11,7 +11,7 @@ Protocol (reproducible by anyone):
    from one generator seeded by ``stable_seed(sequence, image index, noise label)``.
    A ``--noise SPEC`` level uses that :mod:`lburst.noise` model instead.  With
    ``--burst-rotation``, ``--burst-zoom`` or ``--burst-flow`` the in-burst motion also
-   rotates, zooms and flows non-uniformly (:class:`lburst.motion.BurstMotion`, each
+   rotates, zooms and flows non-uniformly (:class:`lburst.burst.motion.BurstMotion`, each
    drawn uniformly up to the given per-frame maximum); such levels are labelled and
    seeded with the motion's name too.
 3. Methods: any :func:`lburst.methods.create` spec, plus ``gold:CKPT`` (the single-image
@@ -48,11 +48,11 @@ from tqdm import tqdm
 from lburst import store
 from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, rotation_deg
 from lburst.bench.sequences import Sequence, list_sequences, read_sequence, rotate_sequence
+from lburst.burst.io import atomic_path
+from lburst.burst.motion import BurstMotion, sample_motion
 from lburst.errors import LBurstOSError, LBurstValueError
 from lburst.features import Features
-from lburst.io import atomic_path
 from lburst.methods import method_slug
-from lburst.motion import BurstMotion, sample_motion
 from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
 from lburst.simulate import random_motion, simulate_burst, stable_seed
 

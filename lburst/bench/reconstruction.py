@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from lburst.io import atomic_path, file_sha1
+from lburst.burst.io import atomic_path, file_sha1
 from lburst.methods import method_slug
 from lburst.methods.learned import results_key
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult

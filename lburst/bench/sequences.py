@@ -10,8 +10,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from lburst.burst.io import IMAGE_SUFFIXES, BurstError, read_image, to_uint8
 from lburst.errors import LBurstFileNotFoundError, LBurstValueError
-from lburst.io import IMAGE_SUFFIXES, BurstError, read_image, to_uint8
 
 
 @dataclass

@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from lburst.io import atomic_path, read_image, write_image
+from lburst.burst.io import atomic_path, read_image, write_image
 
 CROP = 0.8
 

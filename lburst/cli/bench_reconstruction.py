@@ -6,9 +6,9 @@ import argparse
 from pathlib import Path
 
 from lburst.bench.reconstruction import run_benchmark
+from lburst.burst.io import atomic_path
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
-from lburst.io import atomic_path
 from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
 
 

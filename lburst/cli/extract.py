@@ -1,6 +1,6 @@
 """``lburst extract``: features of many bursts, one ``.npz`` each (and an hloc ``features.h5``).
 
-Each BURST is a folder of frames, an image or a video (see :func:`lburst.io.load_burst`).
+Each BURST is a folder of frames, an image or a video (see :func:`lburst.burst.io.load_burst`).
 Each ``.npz`` records what made it (:mod:`lburst.store`: the method spec, its weights'
 SHA-1 and options, the burst's path and content SHA-1); a re-run skips a burst only when
 its file holds the same burst by the same method, and recomputes it otherwise.  A name
@@ -27,14 +27,21 @@ from pathlib import Path
 from tqdm import tqdm
 
 from lburst import store
+from lburst.burst.io import (
+    BurstError,
+    atomic_path,
+    check_output_outside,
+    load_burst,
+    read_features_npz,
+    write_features_h5,
+)
+from lburst.burst.sources import is_recording, open_recording
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_recording_arguments, recording_options
-from lburst.io import BurstError, atomic_path, check_output_outside, load_burst, read_features_npz, write_features_h5
 from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
 from lburst.model.runtimes import RUNTIMES
 from lburst.sfm.outputs import IMAGES, write_common_frame
-from lburst.sources import is_recording, open_recording
 
 CUT_FILE = "cut.json"
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 
+from lburst.burst.keyframes import MotionGate
+from lburst.burst.sources import DEFAULT_FPS, Normalisation, RecordingOptions
 from lburst.cli.numbers import integer, real
 from lburst.errors import LBurstValueError
-from lburst.keyframes import MotionGate
 from lburst.matching import DEFAULT, available, create
-from lburst.sources import DEFAULT_FPS, Normalisation, RecordingOptions
 
 
 def add_recording_arguments(p) -> None:

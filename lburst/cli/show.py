@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lburst.burst.io import BurstError, load_burst
 from lburst.cli.extract import burst_name
 from lburst.cli.numbers import integer
-from lburst.io import BurstError, load_burst
 from lburst.model.extractor import LBurst
 from lburst.viz import plot_keypoints_and_maps
 
@@ -43,7 +43,7 @@ def load_model(weights: str | None, frame_order: str = "temporal", device: str |
 
 
 def _is_recording(args: argparse.Namespace) -> bool:
-    from lburst.sources import RecordingOptions, is_recording
+    from lburst.burst.sources import RecordingOptions, is_recording
 
     options = RecordingOptions(frame_folders=args.frame is not None)  # --frame: a folder of frames is a recording
     return is_recording(args.burst, options) and (args.burst.is_dir() or args.frame is not None)
@@ -51,7 +51,7 @@ def _is_recording(args: argparse.Namespace) -> bool:
 
 def load_recording_burst(args: argparse.Namespace):
     """The burst of ``args.frames`` frames centred on frame ``args.frame`` (default 0) of a recording."""
-    from lburst.sources import RecordingOptions, open_recording
+    from lburst.burst.sources import RecordingOptions, open_recording
 
     frame = args.frame or 0
     options = RecordingOptions(burst=args.frames, every=1, start=frame, max_frames=frame + args.frames // 2 + 1)

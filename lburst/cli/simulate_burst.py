@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lburst.burst.io import read_image, save_burst
 from lburst.cli.numbers import integer, real
-from lburst.io import read_image, save_burst
 from lburst.noise import noise_from_spec
 from lburst.simulate import simulate_burst
 

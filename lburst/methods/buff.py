@@ -42,9 +42,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lburst.burst.frames import gray_unit, time_offsets
 from lburst.errors import LBurstValueError
 from lburst.features import Features, empty_features, image_size, select
-from lburst.frames import gray_unit, time_offsets
 from lburst.methods import register, sift_describe
 from lburst.methods.buff_scale import OctaveStack, frame_pyramids
 

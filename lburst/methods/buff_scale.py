@@ -1,7 +1,7 @@
 """Difference-of-Gaussians scale space of a burst's slope images, for BuFF.
 
 The slope image of slope ``s`` (px/frame) is the mean of the frames resampled at
-``p + t_k * s`` (``t_k = k - N // 2``; see :mod:`lburst.align` for the shift
+``p + t_k * s`` (``t_k = k - N // 2``; see :mod:`lburst.burst.align` for the shift
 convention).  Shifting, averaging and Gaussian blurring are linear and shift-invariant,
 so the DoG of a slope image equals the mean of the frames' own DoGs shifted the same
 way: each frame's Gaussian pyramid is built once (OpenCV's SIFT layout: ``layers + 3``

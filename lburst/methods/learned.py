@@ -33,7 +33,7 @@ def weights_file(spec: str) -> Path | None:
 def results_key(spec: str) -> str:
     """``spec``, plus ``@`` and 12 hex digits of the SHA-1 of the weights it loads, if any
     (the name under which benchmarks cache its results)."""
-    from lburst.io import file_sha1
+    from lburst.burst.io import file_sha1
 
     path = weights_file(spec)
     return f"{spec}@{file_sha1(path)[:12]}" if path is not None and path.is_file() else spec

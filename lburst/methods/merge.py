@@ -6,7 +6,7 @@ uint8, 0..65535 for uint16); :class:`MergeThen` rounds and clips it back to the 
 dtype and hands it to the inner extractor as a 1-frame burst.  Specs ``merge+sift``,
 ``merge+orb``, ``merge+r2d2:CKPT``, ``merge,reduce=median+sift`` build a
 :class:`MergeThen` through :func:`lburst.methods.create` (``merge`` is a registered
-wrapper with :class:`MergeOptions`).  Shift convention: see :mod:`lburst.align`.
+wrapper with :class:`MergeOptions`).  Shift convention: see :mod:`lburst.burst.align`.
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from typing import Literal
 
 import numpy as np
 
-from lburst.align import Method, Motion, align_burst, estimate_shifts, warp_frame
+from lburst.burst.align import Method, Motion, align_burst, estimate_shifts, warp_frame
+from lburst.burst.frames import check_burst, dtype_max
 from lburst.errors import LBurstValueError
 from lburst.features import Extractor, Features
-from lburst.frames import check_burst, dtype_max
 from lburst.methods import register
 
 Reduce = Literal["mean", "median"]
@@ -44,7 +44,7 @@ def merge_burst(
 
     Args:
         burst: uint8/uint16 ``(N, H, W, 3)``, temporal order, N odd.
-        shifts: ``(N, 2)`` ``(dx, dy)`` per frame (see :mod:`lburst.align`); given
+        shifts: ``(N, 2)`` ``(dx, dy)`` per frame (see :mod:`lburst.burst.align`); given
             (e.g. the true ones, the "oracle" merge), nothing is estimated; otherwise
             :func:`estimate_shifts` with ``method`` and ``motion``.
         reduce: ``'mean'`` or ``'median'`` over the frames that cover each pixel.

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lburst.burst.frames import check_burst, to_gray8
 from lburst.features import Features, empty_features, image_size
-from lburst.frames import check_burst, to_gray8
 from lburst.methods import register
 from lburst.numbers import check_integer, check_real
 

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from lburst.align import align_burst
+from lburst.burst.align import align_burst
 from lburst.errors import LBurstValueError
 from lburst.features import Features, concatenate, image_size, select
 from lburst.model.fast import FastLBurstNet, descriptor_stride, descriptors_at
@@ -267,7 +267,7 @@ class LBurst:
         signature of :meth:`lburst.model.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session.
         ``align``: the weights are run on aligned bursts (their checkpoint says
         ``meta['input'] == 'aligned'``): :meth:`extract` and :meth:`dense` warp a uint8 or
-        uint16 burst's frames onto the common frame first (:func:`lburst.align.align_burst`:
+        uint16 burst's frames onto the common frame first (:func:`lburst.burst.align.align_burst`:
         ECC shifts with a constant velocity), as ``align+lburst`` does.
         ``descriptor_mean`` (D,) and ``descriptor_whitening`` (D, D): the weights' descriptor
         whitening (checkpoint ``meta``, :mod:`lburst.train.whitening`); with ``whiten=True``

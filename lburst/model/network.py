@@ -322,7 +322,7 @@ def checkpoint_dict(net: LBurstNet | LiteNet) -> dict:
 
 def write_checkpoint(checkpoint: dict, path: str | Path) -> None:
     """``torch.save`` of ``checkpoint`` (weights, or a training state) to ``path``, atomically."""
-    from lburst.io import atomic_path
+    from lburst.burst.io import atomic_path
 
     with atomic_path(path) as tmp:
         torch.save(checkpoint, tmp)

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lburst.burst.io import atomic_path
 from lburst.extras import require
-from lburst.io import atomic_path
 from lburst.model.fast import CoreModule, FastLBurstNet, pad_maps
 from lburst.model.lite import LiteNet
 from lburst.model.network import WHITENING_KEYS, CheckpointError, LBurstNet, load_checkpoint

@@ -25,7 +25,7 @@ each size: about 1-2 s in all), and the cache keeps the most recent 32 shapes.
 Calibration data (:func:`calibration_bursts`): photos of the training split (``$LBURST_SHARED/data/train``)
 at a random size of the pyramid's range, made into noisy low-light bursts by
 :func:`lburst.simulate.simulate_burst` (random motion, Gaussian or photon noise, seeded),
-aligned by :func:`lburst.align.align_burst` as the light weights' input is, and normalised
+aligned by :func:`lburst.burst.align.align_burst` as the light weights' input is, and normalised
 by :func:`lburst.model.normalize_burst`.
 
 Which runtime to use on which CPU: :func:`choose_runtime` (measurements in its docstring and
@@ -49,9 +49,9 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 import torch
 
+from lburst.burst.io import IMAGE_SUFFIXES
 from lburst.errors import LBurstFileNotFoundError, LBurstOSError, LBurstValueError
 from lburst.extras import require
-from lburst.io import IMAGE_SUFFIXES
 from lburst.model.fast import FastLBurstNet, pad_maps
 from lburst.model.lite import LiteNet
 from lburst.model.network import (
@@ -348,8 +348,8 @@ def calibration_bursts(
     as the light weights read their input) and normalised."""
     import cv2
 
-    from lburst.align import align_burst
-    from lburst.io import decode_file
+    from lburst.burst.align import align_burst
+    from lburst.burst.io import decode_file
     from lburst.model.network import normalize_burst
     from lburst.noise import GaussianNoise, LowLightNoise
     from lburst.simulate import random_motion, simulate_burst
@@ -433,7 +433,7 @@ def quantize_onnx(onnx_path: str | Path, out: str | Path, calibration: Sequence[
     from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
-    from lburst.io import atomic_path
+    from lburst.burst.io import atomic_path
 
     items = [np.ascontiguousarray(x.detach().cpu().numpy(), dtype=np.float32) for x in calibration]
     if not items:

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.burst.io import atomic_path
 from lburst.errors import LBurstValueError
 from lburst.extras import require
-from lburst.io import atomic_path
 
 # XYZ (D65) -> linear sRGB, IEC 61966-2-1
 XYZ_TO_SRGB = np.array(

@@ -7,7 +7,7 @@ frame ``j`` is rendered from the pose at time ``j / fps`` (``fps = 1 / frame_int
 so the bursts of the scene version are the frames around ``j = i * burst_spacing /
 (speed * frame_interval)``.  Ground truth is written per frame in TUM format
 (:mod:`lburst.tum`) with the frame's timestamp, and the camera (PINHOLE, exact) and frame
-rate in the recording's ``meta.json`` (see :mod:`lburst.sources` for where they go).
+rate in the recording's ``meta.json`` (see :mod:`lburst.burst.sources` for where they go).
 
 - **Video** (:func:`write_flight_video`): encoded with H.264 (``crf``, one x264 thread,
   so that the file is the same on every machine), ``yuv420p``, ``faststart``.  With a sensor
@@ -44,13 +44,13 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.burst.io import atomic_path, write_image
+from lburst.burst.sources import ground_truth_path, meta_path
 from lburst.errors import LBurstValueError
 from lburst.extras import require
-from lburst.io import atomic_path, write_image
 from lburst.noise import LowLightNoise, SensorNoise, noise_from_spec
 from lburst.scenes.night_flight import NightFlightConfig, camera_pose, make_city, render_view
 from lburst.scenes.raycast import intrinsics
-from lburst.sources import ground_truth_path, meta_path
 from lburst.tum import write_tum
 
 BLACK_LEVEL = 256  # of a lowlight:... sensor; a calibrated sensor (sensor:...) has its own

@@ -39,8 +39,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from lburst.burst.io import atomic_path, save_burst
 from lburst.errors import LBurstValueError
-from lburst.io import atomic_path, save_burst
 from lburst.numbers import check_integer, check_real
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
 from lburst.scenes.raycast import cast, intrinsics, rays_through

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from lburst.io import atomic_path, frame_name, save_burst
+from lburst.burst.io import atomic_path, frame_name, save_burst
 from lburst.scenes.reference import Reference
 from lburst.sfm.poses import path_length
 from lburst.sfm.scene import SceneError, list_scene, read_image, save_reference

@@ -45,15 +45,15 @@ from lburst.sfm.join import join_models
 
 
 def atomic_path(path: str | Path):
-    """:func:`lburst.io.atomic_path`, imported when first written (it loads OpenCV)."""
-    from lburst.io import atomic_path as _atomic_path
+    """:func:`lburst.burst.io.atomic_path`, imported when first written (it loads OpenCV)."""
+    from lburst.burst.io import atomic_path as _atomic_path
 
     return _atomic_path(path)
 
 
 def opencv_path(path: str | Path) -> str:
-    """:func:`lburst.io.opencv_path`, imported when first used."""
-    from lburst.io import opencv_path as _opencv_path
+    """:func:`lburst.burst.io.opencv_path`, imported when first used."""
+    from lburst.burst.io import opencv_path as _opencv_path
 
     return _opencv_path(path)
 

@@ -15,14 +15,14 @@ from pathlib import Path
 from tqdm import tqdm
 
 from lburst import store
+from lburst.burst.io import BurstError, file_sha1
+from lburst.burst.sources import RecordingOptions, open_recording
 from lburst.features import Features, check_features
-from lburst.io import BurstError, file_sha1
 from lburst.sfm import recording as rec
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import IMAGES, write_common_frame
 from lburst.sfm.result import ReconstructionError
 from lburst.sfm.scene import Scene, load_item
-from lburst.sources import RecordingOptions, open_recording
 
 
 def safe_name(name: str) -> str:

@@ -1,8 +1,8 @@
 """The inputs of a reconstruction, each a source of keyframes: a scene (a folder of bursts or
-photos) or a recording (a video, a frame or DNG folder: :mod:`lburst.sources`).
+photos) or a recording (a video, a frame or DNG folder: :mod:`lburst.burst.sources`).
 
 :func:`open_input` is the one place that asks which kind an input is
-(:func:`lburst.sources.is_recording`); the pipeline (:func:`lburst.sfm.reconstruct.reconstruct_scene`)
+(:func:`lburst.burst.sources.is_recording`); the pipeline (:func:`lburst.sfm.reconstruct.reconstruct_scene`)
 then reads :class:`Keyframes` from it and takes the input's defaults from its attributes:
 ``time_ordered`` (a recording's keyframes come in time order: sequential pairs with loop
 candidates, :func:`lburst.sfm.pairs.pair_plan`) and ``one_camera`` (one camera shot it:
@@ -16,13 +16,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from lburst.burst.sources import RecordingOptions, is_recording
 from lburst.features import Features
 from lburst.sfm.cameras import CameraPlan, camera_origin
 from lburst.sfm.feature_stage import recording_features, scene_features
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import copy_reference, write_scene_times
 from lburst.sfm.scene import Scene, list_scene
-from lburst.sources import RecordingOptions, is_recording
 
 
 @dataclass
@@ -75,5 +75,5 @@ class RecordingInput(SceneInput):
 
 def open_input(path: str | Path, options: RecordingOptions | None = None) -> SceneInput:
     """The input at ``path``: a :class:`RecordingInput` when it is a recording
-    (:func:`lburst.sources.is_recording` with ``options``), else a :class:`SceneInput`."""
+    (:func:`lburst.burst.sources.is_recording` with ``options``), else a :class:`SceneInput`."""
     return RecordingInput(path) if is_recording(path, options) else SceneInput(path)

@@ -35,7 +35,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from lburst.io import file_sha1
+from lburst.burst.io import file_sha1
 from lburst.sfm.poses import path_length, trajectory_errors
 from lburst.sfm.reference import Reference
 

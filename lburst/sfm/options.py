@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
 
+from lburst.burst.sources import RecordingOptions
 from lburst.errors import LBurstValueError
-from lburst.sources import RecordingOptions
 
 AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto' for a scene: exhaustive up to this many images, else sequential
 SCENE_OVERLAP = 10  # sequential pairs of a scene: neighbours on each side
@@ -82,7 +82,7 @@ class ReconstructOptions:
         mapper_threads: threads of the mapper; ``None``: 1 for a recording (the only
             repeatable choice, :class:`lburst.sfm.colmap.ColmapOptions`), ``num_threads``
             for a scene.
-        recording: :class:`lburst.sources.RecordingOptions` for a scene that is a
+        recording: :class:`lburst.burst.sources.RecordingOptions` for a scene that is a
             recording (video or frame folder); ``None``: the defaults.
         matcher: matcher spec (:mod:`lburst.matching`): ``'mnn'`` (mutual nearest
             neighbours), ``'ratio'``, ``'ratio,ratio=0.9'``, ...

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.io import atomic_path, to_uint8, write_features_h5, write_image
+from lburst.burst.io import atomic_path, to_uint8, write_features_h5, write_image
 from lburst.sfm.result import ReconstructionResult, Status
 from lburst.tum import write_tum
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.io import atomic_path, check_output_outside
+from lburst.burst.io import atomic_path, check_output_outside
 from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
 from lburst.sfm.feature_stage import utf8

@@ -1,4 +1,4 @@
-"""A recording (video or frame folder, :mod:`lburst.sources`) as a reconstruction scene.
+"""A recording (video or frame folder, :mod:`lburst.burst.sources`) as a reconstruction scene.
 
 The keyframes are known only once the recording has been read (a video's frame count
 is a promise of its container), so :func:`stream_keyframes` reads it once, yielding each
@@ -19,11 +19,11 @@ from typing import Iterator
 
 import numpy as np
 
-from lburst.io import atomic_path
+from lburst.burst.io import atomic_path
+from lburst.burst.sources import Keyframe, Recording
 from lburst.sfm.poses import path_length
 from lburst.sfm.reference import Reference
 from lburst.sfm.scene import Scene, SceneItem
-from lburst.sources import Keyframe, Recording
 from lburst.tum import lookup, read_tum
 
 KEYFRAMES_FILE = "keyframes.json"

@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from lburst.burst.io import atomic_path
 from lburst.errors import LBurstValueError
-from lburst.io import atomic_path
 
 
 @dataclass

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.burst.io import atomic_path, read_features_npz
 from lburst.errors import LBurstError
-from lburst.io import atomic_path, read_features_npz
 
 RESULT_FILE = "result.json"
 

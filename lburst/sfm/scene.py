@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.burst.io import IMAGE_SUFFIXES, natural_key
 from lburst.errors import LBurstValueError
-from lburst.io import IMAGE_SUFFIXES, natural_key
 from lburst.sfm.reference import Reference
 
 REFERENCE_FILE = "reference.json"
@@ -93,8 +93,8 @@ def list_scene(root: str | Path) -> Scene:
 
 def read_image(path: Path) -> np.ndarray:
     """An image file as RGB ``(H, W, 3)`` uint8 or uint16; ``SceneError`` naming the file if unreadable."""
-    from lburst.io import BurstError
-    from lburst.io import read_image as read_rgb
+    from lburst.burst.io import BurstError
+    from lburst.burst.io import read_image as read_rgb
 
     try:
         return read_rgb(path)
@@ -109,7 +109,7 @@ def load_item(item: SceneItem) -> np.ndarray:
     """
     if item.kind == "image":
         return read_image(item.path)[None]
-    from lburst.io import BurstError, load_burst
+    from lburst.burst.io import BurstError, load_burst
 
     try:
         return load_burst(item.path)
@@ -133,7 +133,7 @@ def reference_cameras(path: str | Path) -> dict[str, dict]:
 
 def save_reference(reference: Reference, path: str | Path, cameras: dict[str, dict] | None = None) -> None:
     """Write ``reference.json`` atomically, with per-image ``cameras`` when given."""
-    from lburst.io import atomic_path
+    from lburst.burst.io import atomic_path
 
     data = reference.to_json()
     if cameras:

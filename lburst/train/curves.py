@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from lburst.io import atomic_path  # noqa: E402
+from lburst.burst.io import atomic_path  # noqa: E402
 
 COMPONENTS = ("loss", "cosim", "peaky", "reliability", "ap")
 

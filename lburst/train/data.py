@@ -20,8 +20,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, Sampler
 
+from lburst.burst.io import IMAGE_SUFFIXES, decode_file
 from lburst.errors import LBurstFileNotFoundError, LBurstOSError, LBurstValueError
-from lburst.io import IMAGE_SUFFIXES, decode_file
 from lburst.train.pairs import PairConfig, training_pair
 
 Split = Literal["train", "validation", "all"]

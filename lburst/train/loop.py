@@ -24,9 +24,9 @@ import torch.nn.functional as F
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
+from lburst.burst.io import atomic_path
 from lburst.errors import LBurstFileExistsError, LBurstValueError
 from lburst.extras import MissingExtra
-from lburst.io import atomic_path
 from lburst.model.lite import LITE_NAME, LiteConfig, LiteNet
 from lburst.model.network import (
     CheckpointError,

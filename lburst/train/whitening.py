@@ -29,8 +29,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from lburst.burst.io import read_image
 from lburst.errors import LBurstValueError
-from lburst.io import read_image
 from lburst.model.extractor import LBurst
 from lburst.model.network import load_checkpoint, save_checkpoint
 from lburst.noise import GaussianNoise

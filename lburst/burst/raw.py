@@ -40,9 +40,9 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.burst.io import BurstError
 from lburst.errors import LBurstValueError
 from lburst.extras import require
-from lburst.io import BurstError
 from lburst.numbers import check_real
 
 RAW_SUFFIXES = (".dng",)

@@ -11,8 +11,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from lburst.burst.io import to_uint8
 from lburst.errors import LBurstValueError
-from lburst.io import to_uint8
 
 #: pixels: the smallest side of a burst that lburst aligns, merges or extracts features from
 MIN_BURST_SIDE = 8

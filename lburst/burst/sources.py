@@ -15,7 +15,7 @@ camera in ``meta.json`` describes the frames so turned.
 
 Keyframes are frames ``start, start + every, start + 2 every, ...``, or, with
 ``motion``, the frames from ``start`` on where the view has moved that fraction of the
-image width since the last keyframe (:mod:`lburst.keyframes`); the burst of
+image width since the last keyframe (:mod:`lburst.burst.keyframes`); the burst of
 keyframe ``k`` is frames ``k - N//2 .. k + N//2`` (``N = burst``, odd), in temporal
 order, keyframe in the middle.  A frame of the window the recording lacks (before its
 first frame, after its last, or dropped) is replaced by the nearest frame of the window
@@ -24,7 +24,7 @@ skipped.  Frames are read as a stream and only those of the bursts being assembl
 held, at most ``N + 1`` at once, so a long recording never sits in memory.
 
 Linear 16-bit frames (DNG, 16-bit PNG/TIFF) are normalised to uint8 with one gain
-for the recording (:mod:`lburst.raw`); 8-bit frames pass unchanged.
+for the recording (:mod:`lburst.burst.raw`); 8-bit frames pass unchanged.
 
 Sidecar files (optional), next to a video ``X.mp4`` or inside a folder ``X/``:
 
@@ -34,7 +34,7 @@ Sidecar files (optional), next to a video ``X.mp4`` or inside a folder ``X/``:
 - ``X.gt.txt`` / ``X/gt.txt``: ground-truth camera poses per frame, TUM format
   (:mod:`lburst.tum`), timestamps on the recording's clock.
 
-Every problem raises :class:`lburst.io.BurstError` naming the file; bursts yielded
+Every problem raises :class:`lburst.burst.io.BurstError` naming the file; bursts yielded
 before it stay valid.
 """
 
@@ -49,12 +49,12 @@ from typing import Iterator
 
 import numpy as np
 
+from lburst.burst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_key, read_image
+from lburst.burst.keyframes import MotionGate, MotionTracker, thumbnail
+from lburst.burst.raw import RAW_SUFFIXES, Normalisation, normalise, read_dng
 from lburst.errors import LBurstValueError
 from lburst.extras import require
-from lburst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_key, read_image
-from lburst.keyframes import MotionGate, MotionTracker, thumbnail
 from lburst.numbers import check_integer, check_real
-from lburst.raw import RAW_SUFFIXES, Normalisation, normalise, read_dng
 
 DEFAULT_FPS = 30.0
 
@@ -66,7 +66,7 @@ class RecordingOptions:
     Attributes:
         burst: frames per burst (odd).
         every: a keyframe every this many frames (without ``motion``).
-        motion: take keyframes by motion instead (:class:`lburst.keyframes.MotionGate`).
+        motion: take keyframes by motion instead (:class:`lburst.burst.keyframes.MotionGate`).
         start: index of the first keyframe.
         fps: frame rate of a frame folder (default: its ``meta.json``, else 30).
         normalisation: brightness normalisation of linear 16-bit frames.
@@ -182,7 +182,7 @@ def is_recording(path: str | Path, options: RecordingOptions | None = None) -> b
 
 
 def read_frame(path: Path) -> np.ndarray:
-    """A frame file as RGB uint8/uint16 (DNG: linear uint16, :func:`lburst.raw.read_dng`)."""
+    """A frame file as RGB uint8/uint16 (DNG: linear uint16, :func:`lburst.burst.raw.read_dng`)."""
     return read_dng(path) if path.suffix.lower() in RAW_SUFFIXES else read_image(path)
 
 

@@ -26,9 +26,9 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from lburst.burst.frames import check_burst, gray_unit, time_offsets
 from lburst.errors import LBurstValueError
 from lburst.extras import require
-from lburst.frames import check_burst, gray_unit, time_offsets
 
 Method = Literal["phase", "ecc", "pyramid"]
 Motion = Literal["free", "linear"]
