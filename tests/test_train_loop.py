@@ -360,3 +360,30 @@ def test_aligned_preset_frames_are_warped_back_onto_the_common_frame(photos):
 
     assert torch.equal(moving[2], aligned[2])
     assert spread(aligned) < 0.3 * spread(moving)
+
+
+def test_a_calibrated_sensors_noise_takes_its_share_of_training_bursts(monkeypatch):
+    from lburst.noise import LowLightNoise, SensorNoise
+    from lburst.train import pairs
+
+    flat = np.full((5, 48, 48, 3), 100.0, np.float32)
+    one = replace(PairConfig(), lowlight_prob=0.0, sensor_prob=1.0, sensors=("a7s2@1600",), lowlight_photons=(20, 20))
+
+    def variance(noise):  # of the 8-bit frames a training burst gets: rounded and clipped
+        return np.clip(np.round(noise(flat, np.random.default_rng(1))), 0, 255).var()
+
+    sensor, lowlight = variance(SensorNoise.preset("a7s2", 1600, photons=20)), variance(LowLightNoise(20))
+    got = pairs._noise(flat, np.random.default_rng(0), one).var()
+    assert abs(got / sensor - 1) < 0.05 and got > 1.5 * lowlight
+
+    mix = replace(PairConfig(), lowlight_prob=0.33, sensor_prob=0.3)
+    drawn = []
+    real = pairs.sensor_from_spec
+    monkeypatch.setattr(pairs, "sensor_from_spec", lambda spec: drawn.append(spec) or real(spec))
+    rng = np.random.default_rng(0)
+    for _ in range(400):
+        pairs._noise(flat[:1, :4, :4], rng, mix)
+    assert abs(len(drawn) / 400 - 0.3) < 0.07
+    names = {spec.split(",")[0] for spec in drawn}
+    photons = [float(spec.split("photons=")[1]) for spec in drawn]
+    assert names == set(pairs.SENSOR_MIX) and 3.0 <= min(photons) and max(photons) <= 60.0

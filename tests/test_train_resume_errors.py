@@ -137,6 +137,26 @@ def test_max_rotation_sets_the_pairs_and_a_resumed_run_keeps_its_own(tmp_path):
         parser.parse_args(["--out", str(tmp_path), "--max-rotation", "nan"])
     (tmp_path / "config.json").write_text(json.dumps({"pair": {"max_rotation_deg": 15.0}}))
     with pytest.raises(ValueError, match=r"leave out --max-rotation 180 \(the run has 15\)"):
-        _check_resumed_pairs(tmp_path, 180.0)
-    _check_resumed_pairs(tmp_path, 15.0)
-    _check_resumed_pairs(tmp_path, None)
+        _check_resumed_pairs(tmp_path, {"max_rotation_deg": 180.0})
+    _check_resumed_pairs(tmp_path, {"max_rotation_deg": 15.0})
+    _check_resumed_pairs(tmp_path, {"max_rotation_deg": None})
+
+
+def test_sensor_options_set_the_pairs_are_checked_and_a_resumed_run_keeps_its_own(tmp_path):
+    from lburst.cli.train import _check_resumed_pairs
+    from lburst.errors import LBurstValueError
+
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    new = ["--out", str(tmp_path / "new"), "--preset", "aligned"]
+    cfg = config_from_args(parser.parse_args([*new, "--sensor-prob", "0.3", "--sensors", "imx686@6400"]))
+    assert (cfg.pair.sensor_prob, cfg.pair.sensors, cfg.pair.lowlight_prob) == (0.3, ("imx686@6400",), 0.33)
+    with pytest.raises(LBurstValueError, match=r"--sensor-prob/--sensors: .*no calibration at ISO 100"):
+        config_from_args(parser.parse_args([*new, "--sensor-prob", "0.3", "--sensors", "imx686@100"]))
+    with pytest.raises(LBurstValueError, match=r"sensor_prob 0.9 must lie in \[0, 1 - lowlight_prob\] = \[0, 0.67\]"):
+        config_from_args(parser.parse_args([*new, "--sensor-prob", "0.9"]))
+    (tmp_path / "config.json").write_text(json.dumps({"pair": {"max_rotation_deg": 15.0}}))
+    with pytest.raises(ValueError, match=r"leave out --sensor-prob 0.3 \(the run has 0\)"):
+        _check_resumed_pairs(tmp_path, {"sensor_prob": 0.3})
+    with pytest.raises(ValueError, match=r"leave out --sensors a7s2@1600 \(the run has imx686@6400 a7s2@1600"):
+        _check_resumed_pairs(tmp_path, {"sensors": ("a7s2@1600",)})

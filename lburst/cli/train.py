@@ -14,6 +14,7 @@ from lburst.errors import LBurstValueError
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.paths import shared_dir
 from lburst.train.loop import PRESETS, TrainConfig, check_resume_options, saved_run_length, train
+from lburst.train.pairs import SENSOR_MIX, PairConfig
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -83,6 +84,19 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "180 trains descriptors to match views turned any way",
     )
     p.add_argument(
+        "--sensor-prob",
+        type=real(0, 1),
+        metavar="P",
+        help="share of training bursts with a calibrated sensor's noise (sensor:NAME@ISO, docs/noise.md), "
+        "taken from the Gaussian share (default 0)",
+    )
+    p.add_argument(
+        "--sensors",
+        nargs="+",
+        metavar="NAME@ISO",
+        help=f"the sensors of --sensor-prob, drawn uniformly per burst (default: {' '.join(SENSOR_MIX)})",
+    )
+    p.add_argument(
         "--spread-weight",
         type=real(0),
         help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)",
@@ -134,8 +148,12 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     overrides = given_options(args)
     names = {f.name for f in fields(TrainConfig)}
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None and k in names})
-    if getattr(args, "max_rotation", None) is not None:
-        cfg = replace(cfg, pair=replace(cfg.pair, max_rotation_deg=args.max_rotation))
+    pair = {k: v for k, v in given_pair_options(args).items() if v is not None}
+    if pair:
+        try:
+            cfg = replace(cfg, pair=replace(cfg.pair, **pair))
+        except LBurstValueError as exc:
+            raise LBurstValueError(f"--sensor-prob/--sensors: {exc}") from exc
     if args.frames is not None:
         cfg = replace(cfg, pair=replace(cfg.pair, frames=args.frames))
     elif cfg.pair.frames != cfg.frames:
@@ -147,16 +165,34 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     return cfg
 
 
-def _check_resumed_pairs(out: Path, max_rotation: float | None) -> None:
-    """``ValueError`` when ``--max-rotation`` differs from the resumed run's own (which it keeps)."""
+def given_pair_options(args: argparse.Namespace) -> dict:
+    """The PairConfig fields set on the command line (``None``: not given)."""
+    return {
+        "max_rotation_deg": getattr(args, "max_rotation", None),
+        "sensor_prob": getattr(args, "sensor_prob", None),
+        "sensors": tuple(args.sensors) if getattr(args, "sensors", None) else None,
+    }
+
+
+PAIR_FLAGS = {"max_rotation_deg": "--max-rotation", "sensor_prob": "--sensor-prob", "sensors": "--sensors"}
+
+
+def _check_resumed_pairs(out: Path, given: dict) -> None:
+    """``LBurstValueError`` when a pair option differs from the resumed run's own (which it keeps)."""
     try:
-        saved = json.loads((Path(out) / "config.json").read_text())["pair"]["max_rotation_deg"]
+        saved = json.loads((Path(out) / "config.json").read_text())["pair"]
     except (OSError, ValueError, KeyError, TypeError):
         return
-    if max_rotation is not None and max_rotation != saved:
-        raise LBurstValueError(
-            f"{out}: a resumed run keeps its own settings; leave out --max-rotation {max_rotation:g} (the run has {saved:g})"
-        )
+    for name, value in given.items():
+        if value is None:
+            continue
+        old = saved.get(name, PairConfig.__dataclass_fields__[name].default)
+        if (tuple(old) if isinstance(old, list) else old) != value:
+            shown = " ".join(value) if isinstance(value, tuple) else f"{value:g}"
+            kept = " ".join(old) if isinstance(old, (list, tuple)) else f"{old:g}"
+            raise LBurstValueError(
+                f"{out}: a resumed run keeps its own settings; leave out {PAIR_FLAGS[name]} {shown} (the run has {kept})"
+            )
 
 
 def main(args: argparse.Namespace) -> int:
@@ -164,7 +200,7 @@ def main(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     if args.resume:
         check_resume_options(args.out, given_options(args))
-        _check_resumed_pairs(args.out, args.max_rotation)
+        _check_resumed_pairs(args.out, given_pair_options(args))
     last = train(
         data,
         args.out,

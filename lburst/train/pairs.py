@@ -15,9 +15,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lburst.burst.motion import BurstMotion
 from lburst.errors import LBurstValueError
-from lburst.motion import BurstMotion
-from lburst.noise import IMAGENET_STD, LowLightNoise
+from lburst.noise import IMAGENET_STD, LowLightNoise, sensor_from_spec
+
+#: The calibrated sensors of ``sensor_prob``: the phone-class IMX686 (a small drone's camera)
+#: at its calibrated ISO, and the full-frame A7S2 on both sides of its dual-gain switch and at
+#: its highest ISO (:data:`lburst.noise.SENSORS`).
+SENSOR_MIX = ("imx686@6400", "a7s2@1600", "a7s2@6400", "a7s2@25600")
 
 
 @dataclass(frozen=True)
@@ -41,7 +46,7 @@ class PairConfig:
             applied before the noise (darker images, same noise: lower SNR).
         gamma_range: per-burst gamma jitter applied before the exposure factor.
         burst_rotation_deg, burst_zoom, burst_flow_px: in-burst motion beyond the
-            translation (:class:`lburst.motion.BurstMotion`): largest rotation per frame,
+            translation (:class:`lburst.burst.motion.BurstMotion`): largest rotation per frame,
             largest relative zoom per frame, largest std of the smooth non-uniform flow
             per frame (drawn uniformly per burst).
         align_error_px: if not None, every noisy frame is warped back onto the common
@@ -51,6 +56,11 @@ class PairConfig:
         lowlight_prob, lowlight_photons: probability of physical low-light noise
             (:class:`lburst.noise.LowLightNoise`, photons at white drawn log-uniformly
             in the range) instead of the Gaussian noise.
+        sensor_prob, sensors: probability of a calibrated sensor's noise instead
+            (:class:`lburst.noise.SensorNoise`: one of ``sensors``, each ``NAME@ISO`` as in
+            ``sensor:NAME@ISO``, drawn uniformly per burst, exposed with photons at white drawn
+            log-uniformly in ``lowlight_photons``); the three kinds of noise are drawn with
+            one number, so ``lowlight_prob + sensor_prob`` is at most 1.
     """
 
     frames: int = 5
@@ -71,7 +81,20 @@ class PairConfig:
     burst_flow_px: float = 0.0
     lowlight_prob: float = 0.0
     lowlight_photons: tuple[float, float] = (3.0, 60.0)
+    sensor_prob: float = 0.0
+    sensors: tuple[str, ...] = SENSOR_MIX
     align_error_px: float | None = None
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.sensor_prob <= 1.0 - self.lowlight_prob:
+            raise LBurstValueError(
+                f"sensor_prob {self.sensor_prob} must lie in [0, 1 - lowlight_prob] = [0, {1.0 - self.lowlight_prob:g}]"
+            )
+        if self.sensor_prob:
+            if not self.sensors:
+                raise LBurstValueError("sensor_prob > 0 needs at least one sensor (NAME@ISO)")
+            for sensor in self.sensors:
+                sensor_from_spec(sensor)
 
 
 @dataclass
@@ -143,10 +166,16 @@ def _exposure(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> 
 
 
 def _noise(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
-    """Per-frame, per-channel noise (Gaussian, or physical low light), rounded and clipped."""
-    if cfg.lowlight_prob and rng.random() < cfg.lowlight_prob:
+    """Per-frame, per-channel noise (Gaussian, physical low light or a calibrated sensor's),
+    rounded and clipped."""
+    kind = rng.random() if cfg.lowlight_prob or cfg.sensor_prob else 1.0
+    if kind < cfg.lowlight_prob:
         photons = float(np.exp(rng.uniform(*np.log(cfg.lowlight_photons))))
         noisy = LowLightNoise(photons)(frames, rng)
+    elif kind < cfg.lowlight_prob + cfg.sensor_prob:
+        sensor = cfg.sensors[int(rng.integers(len(cfg.sensors)))]
+        photons = float(np.exp(rng.uniform(*np.log(cfg.lowlight_photons))))
+        noisy = sensor_from_spec(f"{sensor},photons={photons!r}")(frames, rng)
     else:
         if cfg.noise_variance is not None:
             variance = rng.uniform(*cfg.noise_variance)
@@ -203,7 +232,7 @@ def _estimated_shifts(motion: BurstMotion, cfg: PairConfig, rng: np.random.Gener
 
 def _align(frames: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """Frames warped back by ``shifts`` (``out(p) = frame(p + shift)``), rounded and clipped."""
-    from lburst.align import warp_frame
+    from lburst.burst.align import warp_frame
 
     out = frames.copy()
     for i, shift in enumerate(shifts):
