@@ -153,3 +153,30 @@ def test_views_turned_by_45_degrees_match_through_eight_rotation_sets(lite):
     upright = lite.extract(turned, top_k=500)
     plain, _ = correct(create("mnn")(a, upright), a, upright)
     assert plain < found / 3
+
+
+def test_the_set_is_chosen_on_the_strongest_keypoints_and_matched_whole(monkeypatch):
+    from lburst import matching
+
+    rng = np.random.default_rng(5)
+    n = 1500
+    upright = _features(n, 0, rng)
+    a = {"descriptors": upright, "scores": rng.random(n, np.float32)}
+    order = rng.permutation(n)
+    sets = [_features(n, t, rng) for t in range(4)]
+    sets[3] = upright[order] + 0.01 * rng.normal(size=upright.shape).astype(np.float32)
+    b = {
+        "descriptors": np.concatenate(sets).astype(np.float32),
+        "scores": rng.random(4 * n, np.float32),
+        "rotations": np.repeat(np.arange(0, 360, 90, dtype=np.uint16), n),
+    }
+    sizes = []
+    real = matching.distinctive_matches
+    monkeypatch.setattr(
+        matching, "distinctive_matches", lambda da, db: sizes.append((len(da), len(db))) or real(da, db)
+    )
+    matches = create("mnn")(a, b)
+    assert sizes == [(matching.CHOICE_KEYPOINTS, matching.CHOICE_KEYPOINTS)] * 4
+    assert len(matches) == n and np.array_equal(order[matches[:, 1] - 3 * n], matches[:, 0])
+    top = matching.strongest(a, np.arange(n), 10)
+    assert np.array_equal(top, np.sort(np.argsort(-a["scores"])[:10]))
