@@ -1,16 +1,21 @@
-"""One question about the kind of input (issue 28): :func:`lburst.sfm.inputs.open_input` asks it,
-the pipeline takes the input's defaults from the answer."""
+"""One question about the kind of input (issue 28): :mod:`lburst.sfm.inputs` asks it
+(:func:`open_input`, :func:`open_bursts`), the pipeline takes the input's defaults from the
+answer, and ``extract``, ``show`` and ``reconstruct`` read every input through its sources."""
 
 from __future__ import annotations
 
 import ast
 from pathlib import Path
 
-import lburst
-from lburst.burst.sources import RecordingOptions
-from lburst.sfm.inputs import RecordingInput, SceneInput, open_input
+import numpy as np
 
-SFM = Path(lburst.__file__).parent / "sfm"
+import lburst
+from lburst import store
+from lburst.burst.io import save_burst
+from lburst.burst.sources import RecordingOptions
+from lburst.sfm.inputs import BurstInput, RecordingInput, SceneInput, open_bursts, open_input
+
+ROOT = Path(lburst.__file__).parent
 
 
 def test_open_input_tells_a_scene_from_a_recording(tmp_path):
@@ -26,14 +31,56 @@ def test_open_input_tells_a_scene_from_a_recording(tmp_path):
     assert isinstance(recording, RecordingInput) and recording.time_ordered and recording.one_camera
 
 
-def test_only_the_inputs_ask_whether_an_input_is_a_recording():
+def test_only_the_sources_ask_whether_an_input_is_a_recording():
+    """``is_recording`` is defined in lburst/burst/sources.py and named nowhere else in the
+    package but lburst/sfm/inputs.py (no other module imports or calls it)."""
     asking = sorted(
-        path.name
-        for path in SFM.glob("*.py")
+        path.relative_to(ROOT).as_posix()
+        for path in ROOT.rglob("*.py")
         if any(
-            isinstance(node, ast.Name | ast.alias)
-            and "is_recording" in (getattr(node, "id", None), getattr(node, "name", None))
+            isinstance(node, ast.Name | ast.alias | ast.Attribute)
+            and "is_recording" in (getattr(node, "id", None), getattr(node, "name", None), getattr(node, "attr", None))
             for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
         )
     )
-    assert asking == ["inputs.py"], asking
+    assert asking == ["sfm/inputs.py"], asking
+
+
+def test_open_bursts_tells_a_burst_from_a_recording(tmp_path):
+    """``extract`` and ``show``: a whole video or a folder of frames is one burst unless the
+    options cut it (``--every``/``--motion``/``--frame``); a folder with meta.json is a recording."""
+    (tmp_path / "frames").mkdir()
+    (tmp_path / "frames" / "img_0.png").write_bytes(b"")
+    (tmp_path / "clip.mp4").write_bytes(b"")
+    (tmp_path / "rec").mkdir()
+    (tmp_path / "rec" / "meta.json").write_text("{}")
+    assert type(open_bursts(tmp_path / "clip.mp4")) is BurstInput
+    assert type(open_bursts(tmp_path / "frames", RecordingOptions())) is BurstInput
+    cut = RecordingOptions(every=4, frame_folders=True)
+    assert isinstance(open_bursts(tmp_path / "clip.mp4", cut), RecordingInput)
+    assert isinstance(open_bursts(tmp_path / "frames", cut), RecordingInput)
+    assert isinstance(open_bursts(tmp_path / "rec"), RecordingInput)
+    assert open_bursts(tmp_path / "rec").folder == "rec" and open_bursts(tmp_path / "clip.mp4").folder == ""
+
+
+def _keys(source) -> list[tuple[str, dict]]:
+    return [(b.name, b.key) for b in source.keyframe_bursts(store.method_key("sift"))]
+
+
+def test_every_source_yields_named_bursts_keyed_as_the_store_keys_them(tmp_path):
+    """A scene's burst and the same folder given alone have one key (so reconstruct finds what
+    extract stored); a recording's keyframes are keyed by the recording, its cut and their names."""
+    frames = np.random.default_rng(0).integers(0, 255, (3, 24, 32, 3), dtype=np.uint8)
+    for name in ("b0", "b1"):
+        save_burst(frames, tmp_path / "scene" / name)
+    scene = _keys(SceneInput(tmp_path / "scene"))
+    assert [name for name, _ in scene] == ["b0", "b1"]
+    assert scene[0] == _keys(BurstInput(tmp_path / "scene" / "b0"))[0]
+    assert scene[0][1] == store.key(store.method_key("sift"), tmp_path / "scene" / "b0")
+    save_burst(np.concatenate([frames] * 3), tmp_path / "rec", whole=True)
+    (tmp_path / "rec" / "meta.json").write_text("{}")
+    source = open_bursts(tmp_path / "rec", RecordingOptions(burst=3, every=4))
+    bursts = list(source.keyframe_bursts(store.method_key("sift")))
+    assert [b.index for b in bursts] == [0, 4, 8] and bursts[1].load().shape == (3, 24, 32, 3)
+    assert {b.key["source"]["keyframe"] for b in bursts} == {b.name for b in bursts}
+    assert len({b.key["source"]["sha1"] for b in bursts}) == 1

@@ -31,29 +31,20 @@ from lburst.burst.io import (
     BurstError,
     atomic_path,
     check_output_outside,
-    load_burst,
     read_features_npz,
     write_features_h5,
 )
-from lburst.burst.sources import is_recording, open_recording
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_recording_arguments, recording_options
+from lburst.errors import LBurstError
 from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
 from lburst.model.runtimes import RUNTIMES
-from lburst.sfm.outputs import IMAGES, write_common_frame
+from lburst.sfm.feature_stage import Layout, keyframe_features
+from lburst.sfm.inputs import InputSource, burst_name, open_bursts
+from lburst.sfm.outputs import IMAGES
 
 CUT_FILE = "cut.json"
-
-
-def burst_name(path: Path) -> str:
-    """A burst's name in outputs: the folder or file name without suffix (``.`` is the
-    current folder's name)."""
-    path = Path(os.path.abspath(path))
-    name = path.stem if path.is_file() else path.name
-    if not name or name.startswith("."):
-        raise BurstError(f"{path}: no name to give its output (a hidden or root path)")
-    return name
 
 
 def method_spec(method: str | None, weights: str | None, frame_order: str | None = None) -> str:
@@ -105,44 +96,6 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "network lburst-lite; torch for the others); the bf16 and int8 runtimes move some keypoints",
     )
     add_recording_arguments(p)
-
-
-def extract_recording(
-    path: Path, extractor, args: argparse.Namespace, method: dict, finished: list[tuple[str, Path]]
-) -> tuple[int, int, str | None]:
-    """Features of every keyframe burst of a recording, one ``.npz`` each in ``OUT/<recording>/``;
-    returns (extracted, already done, why reading stopped or ``None``) and appends the
-    finished keyframes to ``finished``.  Keyframes finished before a bad frame are kept.
-    ``OUT/<recording>/cut.json`` lists this cut's keyframes (:func:`write_cut`): a cut with
-    other options leaves the earlier cut's files, unlisted, and says so.  The common frame of
-    each keyframe goes to ``OUT/images/<recording>/<keyframe>.png``."""
-    folder = args.out / burst_name(path)
-    done = skipped = 0
-    names: list[str] = []
-    options = recording_options(args)
-    try:
-        recording = open_recording(path, options)
-        content = store.recording_content(recording)
-        for keyframe, burst in recording.bursts():
-            target = folder / f"{keyframe.name}.npz"
-            image = args.out / IMAGES / burst_name(path) / f"{keyframe.name}.png"
-            key = store.key(method, path, content, keyframe=keyframe.name)
-            if not args.overwrite and store.load(target, key) is not None:
-                skipped += 1
-            else:
-                features = extractor(burst)
-                folder.mkdir(parents=True, exist_ok=True)
-                store.save(target, features, (burst.shape[2], burst.shape[1]), key)
-                done += 1
-            if not image.is_file() or image.stat().st_mtime < target.stat().st_mtime:
-                write_common_frame(image, burst)
-            names.append(keyframe.name)
-            finished.append((image.relative_to(args.out / IMAGES).as_posix(), target))
-    except (BurstError, ValueError, OSError) as exc:
-        write_cut(folder, path, options, names)
-        return done, skipped, str(exc)
-    write_cut(folder, path, options, names)
-    return done, skipped, None
 
 
 def write_cut(folder: Path, path: Path, options, names: list[str]) -> None:
@@ -198,42 +151,30 @@ def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
             write_features_h5(tmp, group, features, tuple(int(v) for v in features["imsize"]))
 
 
-def extract_burst(
-    path: Path, extractor, args: argparse.Namespace, method: dict, names: dict[str, Path]
-) -> tuple[str, Path, bool]:
-    """Features of one burst into ``OUT/<name>.npz`` and its common frame into
-    ``OUT/images/<name>.png``: (name, file, whether computed now).
-    ``BurstError`` when the name is taken by another burst (in this run or on disk)."""
-    if not path.exists():
-        raise BurstError(f"{path}: no such file or folder")
-    name = burst_name(path)
-    target = args.out / f"{name}.npz"
-    here = Path(os.path.abspath(path))
-    if names.setdefault(name, here) != here:
-        raise BurstError(
-            f"{path}: same output name {name!r} as {names[name]} in this run; extract one of them into another --out"
-        )
-    key = store.key(method, path)
-    image = args.out / IMAGES / f"{name}.png"
-    if target.exists() and not args.overwrite:
-        if store.load(target, key) is not None:
-            if not image.is_file() or image.stat().st_mtime < target.stat().st_mtime:
-                write_common_frame(image, load_burst(path))  # features of an earlier run without it
-            return name, target, False
-        if store.is_foreign(target):
-            raise BurstError(
-                f"{path}: {target} exists and was not written by lburst; use another --out, or --overwrite to replace it"
-            )
-        meta = store.read_meta(target)
-        if not store.same_source(meta, key):
-            raise BurstError(
-                f"{path}: {target} holds the features of another burst with the same name "
-                f"({meta['key']['source']['path']}); use another --out, or --overwrite to replace them"
-            )
-    burst = load_burst(path)
-    store.save(target, extractor(burst), (burst.shape[2], burst.shape[1]), key)
-    write_common_frame(image, burst)
-    return name, target, True
+def extract_input(
+    source: InputSource, extractor, args: argparse.Namespace, method: dict, finished: list[tuple[str, Path]]
+) -> tuple[int, int]:
+    """Features of every burst of ``source`` (:func:`lburst.sfm.feature_stage.keyframe_features`),
+    one ``.npz`` each in ``OUT/<folder>/`` with its common frame in ``OUT/images/<folder>/``
+    (``folder``: :attr:`lburst.sfm.inputs.InputSource.folder`, a recording's name, else none);
+    returns (computed, already done) and appends each finished burst to ``finished`` as
+    (features.h5 group, ``.npz``), so that those done before a failure are kept.  A source
+    with a folder (a recording) lists the names it finished in ``OUT/<folder>/cut.json``
+    (:func:`write_cut`), even when it fails."""
+    layout = Layout(args.out / source.folder, args.out / IMAGES / source.folder)
+    done = skipped = 0
+    names: list[str] = []
+    bursts = source.keyframe_bursts(method)
+    try:
+        for burst in keyframe_features(bursts, extractor, layout, reuse=not args.overwrite, protect=True):
+            done, skipped = done + burst.computed, skipped + (not burst.computed)
+            group = layout.image_path(burst.burst.name).relative_to(args.out / IMAGES).as_posix()
+            finished.append((group, layout.features_path(burst.burst.name)))
+            names.append(burst.burst.name)
+    finally:
+        if source.folder:
+            write_cut(layout.features, source.path, recording_options(args), names)
+    return done, skipped
 
 
 def main(args: argparse.Namespace) -> int:
@@ -262,23 +203,26 @@ def main(args: argparse.Namespace) -> int:
     except ValueError:
         raise  # lburst.cli.main prints it as one line and exits with 2
     for path in tqdm(args.bursts, desc=f"extract {spec}", unit="burst"):
-        if is_recording(path, cut) and (path.is_dir() or cut.frame_folders):
-            new, old, problem = extract_recording(path, extractor, args, method, finished)
-            tqdm.write(f"{path}: {new} keyframes extracted, {old} already done")
-            done += 1
-            if problem:
-                failed.append((path, problem))
-                tqdm.write(f"stopped {path}: {problem}", file=sys.stderr)
-                done -= 1
-            continue
+        source = open_bursts(path, cut)  # a burst, or a recording cut into keyframe bursts
         try:
-            name, target, computed = extract_burst(path, extractor, args, method, names)
-        except (BurstError, ValueError, OSError, RuntimeError) as exc:
+            here = Path(os.path.abspath(path))
+            if names.setdefault(burst_name(path), here) != here:
+                raise BurstError(
+                    f"{path}: same output name {burst_name(path)!r} as {names[burst_name(path)]} in this run; "
+                    "extract one of them into another --out"
+                )
+            new, old = extract_input(source, extractor, args, method, finished)
+        except (LBurstError, ValueError, OSError, RuntimeError) as exc:
             failed.append((path, str(exc)))
             tqdm.write(f"skipped {exc if str(exc).startswith(str(path)) else f'{path}: {exc}'}", file=sys.stderr)
             continue
-        finished.append((f"{name}.png", target))
-        done += computed
+        if source.folder:
+            tqdm.write(f"{path}: {new} keyframes extracted, {old} already done")
+        if source.error:
+            failed.append((path, source.error))
+            tqdm.write(f"stopped {path}: {source.error}", file=sys.stderr)
+            continue
+        done += new > 0
     if args.h5:
         write_h5(args.out / "features.h5", sorted({**features_in_folder(args.out), **dict(finished)}.items()))
     print(

@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from lburst.burst.io import BurstError, load_burst
-from lburst.cli.extract import burst_name
+from lburst.burst.io import BurstError
+from lburst.burst.sources import RecordingOptions
 from lburst.cli.numbers import integer
 from lburst.model.extractor import LBurst
+from lburst.sfm.inputs import burst_name, open_bursts
 from lburst.viz import plot_keypoints_and_maps
 
 
@@ -42,28 +43,26 @@ def load_model(weights: str | None, frame_order: str = "temporal", device: str |
     return LBurst.pretrained("lburst-b5", device=device)
 
 
-def _is_recording(args: argparse.Namespace) -> bool:
-    from lburst.burst.sources import RecordingOptions, is_recording
-
-    options = RecordingOptions(frame_folders=args.frame is not None)  # --frame: a folder of frames is a recording
-    return is_recording(args.burst, options) and (args.burst.is_dir() or args.frame is not None)
-
-
-def load_recording_burst(args: argparse.Namespace):
-    """The burst of ``args.frames`` frames centred on frame ``args.frame`` (default 0) of a recording."""
-    from lburst.burst.sources import RecordingOptions, open_recording
-
+def load_shown_burst(args: argparse.Namespace):
+    """The burst to show: ``args.burst`` itself, or, of a recording (:func:`lburst.sfm.inputs.open_bursts`),
+    the burst of ``args.frames`` frames centred on frame ``args.frame`` (default 0)."""
     frame = args.frame or 0
-    options = RecordingOptions(burst=args.frames, every=1, start=frame, max_frames=frame + args.frames // 2 + 1)
-    for keyframe, burst in open_recording(args.burst, options).bursts():
-        if keyframe.index == frame:
-            return burst
+    options = RecordingOptions(
+        burst=args.frames,
+        every=1,
+        start=frame,
+        max_frames=frame + args.frames // 2 + 1,
+        frame_folders=args.frame is not None,  # --frame: a video or a folder of frames is a recording
+    )
+    for burst in open_bursts(args.burst, options).keyframe_bursts():
+        if burst.index in (None, frame):  # a burst, or the keyframe asked for
+            return burst.load()
     raise BurstError(f"{args.burst}: no frame {frame}")
 
 
 def main(args: argparse.Namespace) -> int:
     model = load_model(args.weights, args.frame_order, args.device)
-    burst = load_recording_burst(args) if _is_recording(args) else load_burst(args.burst)
+    burst = load_shown_burst(args)
     features = model.extract(burst, top_k=args.top_k)
     dense = model.dense(burst)
     out = args.out or Path(f"{burst_name(args.burst)}_keypoints.png")

@@ -1,28 +1,126 @@
-"""The features stage of a reconstruction: the features of each burst's common frame (a
-scene's bursts: :func:`scene_features`; a recording's keyframes, read once:
-:func:`recording_features`), with any method spec, and the common frames written as
-``OUT/images/<name>.png`` for COLMAP.  Features are cached in ``OUT/features/<name>.npz``
-under the store's key (:func:`lburst.store.key`), so an interrupted run resumes; features
-that ``lburst extract --out DIR`` stored for the same burst by the same method are taken
-from ``DIR`` (:func:`stored_paths`), by default ``OUT``, and not computed again.
+"""The features stage: one loop (:func:`keyframe_features`) over the named keyframe bursts
+(:class:`KeyframeBurst`) that any source yields (:mod:`lburst.sfm.inputs`: a burst, a scene
+of bursts, a recording's keyframes), with any method as its per-burst ``compute``.
+
+Each burst's features go to ``<features>/<name>.npz`` under the key its source gave it
+(:func:`lburst.store.key`), with the SHA-1 of its common frame, written as
+``<images>/<name>.png`` (:class:`Layout`).  Features stored there under that key, beside the
+image they describe, are used as they are; features stored under the same key elsewhere
+(``lburst reconstruct`` finds those of ``lburst extract``: :attr:`Layout.elsewhere`) are
+copied, not computed again.  The loop never asks what kind of input it reads: it takes
+bursts one at a time, so a cluster map can take its place.
 """
 
 from __future__ import annotations
 
-import os
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from tqdm import tqdm
+import numpy as np
 
 from lburst import store
 from lburst.burst.io import BurstError, file_sha1
-from lburst.burst.sources import RecordingOptions, open_recording
 from lburst.features import Features, check_features
-from lburst.sfm import recording as rec
-from lburst.sfm.options import ReconstructOptions
-from lburst.sfm.outputs import IMAGES, write_common_frame
+from lburst.sfm.outputs import write_common_frame
 from lburst.sfm.result import ReconstructionError
-from lburst.sfm.scene import Scene, load_item
+
+
+@dataclass(frozen=True)
+class KeyframeBurst:
+    """A named burst of a source: ``name`` names its image (``<name>.png``) and its features
+    (``<name>.npz``), ``key`` is the store's key of its features (the source decides it;
+    ``None`` when no method is given), ``load()`` reads the burst ``(N, H, W, 3)``, and a
+    recording's keyframe has its frame ``index`` and ``time`` (s)."""
+
+    name: str
+    key: dict[str, Any] | None
+    load: Callable[[], np.ndarray]
+    index: int | None = None
+    time: float | None = None
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where the loop keeps a burst's features (``features/<name>.npz``) and common frame
+    (``images/<name>.png``), and the folders where the same features may be stored already."""
+
+    features: Path
+    images: Path
+    elsewhere: tuple[Path, ...] = ()
+
+    def features_path(self, name: str) -> Path:
+        return self.features / f"{name}.npz"
+
+    def image_path(self, name: str) -> Path:
+        return self.images / f"{name}.png"
+
+    def stored_paths(self, name: str) -> list[Path]:
+        return [self.features_path(name)] + [folder / f"{name}.npz" for folder in self.elsewhere]
+
+
+@dataclass(frozen=True)
+class Extracted:
+    """The features of one keyframe burst, and whether they were computed now."""
+
+    burst: KeyframeBurst
+    features: Features
+    computed: bool
+
+
+def stored(layout: Layout, name: str, key: Any) -> Features | None:
+    """The features of ``name`` stored in ``layout`` under ``key``, when its image is there and
+    is the one they describe (its SHA-1 recorded with them); else ``None``."""
+    found = store.load(layout.features_path(name), key)
+    image = layout.image_path(name)
+    if found is None or not image.is_file() or found[2].get("image_sha1") != file_sha1(image):
+        return None
+    return found[0]
+
+
+def check_target(path: Path, key: dict[str, Any]) -> None:
+    """Refuse to replace ``path`` when lburst did not write it, or when it holds the features
+    of another burst with the same name (:func:`lburst.store.same_source`)."""
+    if not path.exists():
+        return
+    where = key["source"]["path"]
+    if store.is_foreign(path):
+        raise BurstError(
+            f"{where}: {path} exists and was not written by lburst; use another --out, or --overwrite to replace it"
+        )
+    meta = store.read_meta(path)
+    if not store.same_source(meta, key):
+        raise BurstError(
+            f"{where}: {path} holds the features of another burst with the same name "
+            f"({meta['key']['source']['path']}); use another --out, or --overwrite to replace them"
+        )
+
+
+def keyframe_features(
+    bursts: Iterable[KeyframeBurst],
+    compute: Callable[[np.ndarray], Features],
+    layout: Layout,
+    *,
+    reuse: bool = True,
+    protect: bool = False,
+) -> Iterator[Extracted]:
+    """The features of each burst, in order, as they are done (module docstring).  ``reuse``:
+    take stored features (``False``: compute every burst again); ``protect``: refuse to
+    replace a file of someone else's or of another burst (:func:`check_target`)."""
+    for burst in bursts:
+        target, image = layout.features_path(burst.name), layout.image_path(burst.name)
+        if reuse and (features := stored(layout, burst.name, burst.key)) is not None:
+            yield Extracted(burst, features, computed=False)
+            continue
+        if protect and reuse:
+            check_target(target, burst.key)
+        frames = burst.load()
+        write_common_frame(image, frames)
+        found = store.find(layout.stored_paths(burst.name), burst.key) if reuse else None
+        features = compute(frames) if found is None else found[0]
+        store.save(target, features, (frames.shape[2], frames.shape[1]), burst.key, image_sha1=file_sha1(image))
+        yield Extracted(burst, store.load(target, burst.key)[0], computed=found is None)  # as stored
 
 
 def safe_name(name: str) -> str:
@@ -40,19 +138,6 @@ def utf8(text: str) -> bool:
     return True
 
 
-def stored_paths(out: Path, name: str, extracted: Path | None, recording: Path | None = None) -> list[Path]:
-    """Where the features of burst ``name`` may be stored: reconstruct's own cache
-    ``OUT/features/<name>.npz``, then where ``lburst extract --out EXTRACTED`` puts them
-    (``EXTRACTED/<name>.npz``; a recording's keyframe: ``EXTRACTED/<recording>/<name>.npz``)."""
-    folder = out if extracted is None else Path(extracted)
-    own = [out / "features" / f"{safe_name(name)}.npz"]
-    if recording is not None:
-        recording = Path(os.path.abspath(recording))  # named as lburst extract names it
-        stem = recording.stem if recording.is_file() else recording.name
-        return own + [folder / stem / f"{name}.npz"]
-    return own + [folder / f"{name}.npz"]
-
-
 class LazyExtractor:
     """``extractor(burst)``, checked (:func:`lburst.features.check_features`), the method created
     from ``spec`` on first use only, so a run whose features are all stored never loads a network."""
@@ -62,78 +147,7 @@ class LazyExtractor:
 
     def __call__(self, burst) -> Features:
         if self.extractor is None:
-            from lburst.methods import create
+            from lburst.methods import create  # loads torch: only when a burst needs computing
 
             self.extractor = create(self.spec)
         return check_features(self.extractor(burst))
-
-
-def scene_features(
-    scene: Scene, spec: str, out: Path, progress: bool = True, extractor=None, extracted: Path | None = None
-) -> list[Features]:
-    """Features of each item's common frame (with their ``image_size`` (W, H)); writes
-    ``out/images/<name>.png`` too.  Stored features under the same key
-    (:func:`stored_paths`) are used, not computed again."""
-    features = []
-    method = store.method_key(spec)
-    extract = LazyExtractor(spec, extractor)
-    for item in tqdm(scene.items, desc=f"features {spec}", disable=not progress, leave=False):
-        paths = stored_paths(out, item.name, extracted)
-        cache = paths[0]
-        image_path = out / IMAGES / f"{item.name}.png"
-        key = store.key(method, item.path)  # the burst's content and the weights: no stale features
-        cached = store.load(cache, key)
-        if cached is not None and image_path.is_file() and cached[2].get("image_sha1") == file_sha1(image_path):
-            features.append(cached[0])
-            continue
-        burst = load_item(item)
-        write_common_frame(image_path, burst)
-        found = cached or store.find(paths[1:], key)
-        feats = found[0] if found is not None else extract(burst)
-        store.save(cache, feats, (burst.shape[2], burst.shape[1]), key, image_sha1=file_sha1(image_path))
-        features.append(store.load(cache, key)[0])  # as stored, so a rerun gives the same
-    return features
-
-
-def recording_features(
-    path: str | Path, spec: str, out: Path, opts: ReconstructOptions, extractor=None
-) -> tuple[Scene, list[Features], str | None]:
-    """The keyframe scene of a recording (:mod:`lburst.sfm.recording`), the features of each
-    keyframe (with their ``image_size`` (W, H)), and why reading stopped early (or ``None``).
-    Features are stored as for bursts, under the store's key of the keyframe (the method,
-    the recording's content and options, the keyframe's name: :func:`lburst.store.key`), the
-    key ``lburst extract`` gives them too, so those it stored are used (:func:`stored_paths`)."""
-    try:
-        recording = open_recording(path, opts.recording or RecordingOptions())
-    except BurstError as err:
-        raise ReconstructionError(str(err)) from err
-    method, content = store.method_key(spec), store.recording_content(recording)
-    extract = LazyExtractor(spec, extractor)
-
-    def key(name: str) -> dict:
-        return store.key(method, path, content, keyframe=name)
-
-    def paths(name: str) -> list[Path]:
-        return stored_paths(out, name, opts.features, Path(path))
-
-    def cached(name: str) -> bool:
-        return store.load(paths(name)[0], key(name)) is not None and (out / IMAGES / f"{name}.png").is_file()
-
-    keyframes = rec.load_keyframes(out, store.key(method, path, content))
-    error = None
-    if keyframes is None or not all(cached(k.name) for k in keyframes):
-        keyframes = []
-        stream = rec.stream_keyframes(recording, cached, keyframes)
-        try:
-            for keyframe, burst in tqdm(stream, desc=f"keyframes {spec}", disable=not opts.progress, leave=False):
-                if burst is None:
-                    continue
-                write_common_frame(out / IMAGES / f"{keyframe.name}.png", burst)
-                found = store.find(paths(keyframe.name), key(keyframe.name))
-                feats = found[0] if found is not None else extract(burst)
-                store.save(paths(keyframe.name)[0], feats, (burst.shape[2], burst.shape[1]), key(keyframe.name))
-        except BurstError as err:
-            error = str(err)
-        rec.save_keyframes(out, store.key(method, path, content), recording, keyframes, error)
-    features = [store.load(paths(k.name)[0], key(k.name))[0] for k in keyframes]
-    return rec.keyframe_scene(recording, keyframes, out), features, error

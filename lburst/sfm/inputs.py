@@ -1,28 +1,55 @@
-"""The inputs of a reconstruction, each a source of keyframes: a scene (a folder of bursts or
-photos) or a recording (a video, a frame or DNG folder: :mod:`lburst.burst.sources`).
+"""Every input as a source of named keyframe bursts (:class:`lburst.sfm.feature_stage.KeyframeBurst`):
+one burst (a folder of frames, an image, a whole video: :class:`BurstInput`), a scene (a
+folder of bursts or photos: :class:`SceneInput`) or a recording (a video, a frame or DNG
+folder cut into keyframe bursts: :class:`RecordingInput`, :mod:`lburst.burst.sources`).
 
-:func:`open_input` is the one place that asks which kind an input is
-(:func:`lburst.burst.sources.is_recording`); the pipeline (:func:`lburst.sfm.reconstruct.reconstruct_scene`)
-then reads :class:`Keyframes` from it and takes the input's defaults from its attributes:
-``time_ordered`` (a recording's keyframes come in time order: sequential pairs with loop
-candidates, :func:`lburst.sfm.pairs.pair_plan`) and ``one_camera`` (one camera shot it:
-one COLMAP camera by default, :mod:`lburst.sfm.cameras`).  Both leave the same files:
-``OUT/images/``, the features, ``OUT/keyframes.json`` (times) and ``OUT/reference.json``
-when there is a reference.
+:func:`open_input` (``lburst reconstruct``: a scene or a recording) and :func:`open_bursts`
+(``lburst extract`` and ``lburst show``: a burst or a recording) are the one place that asks
+which kind an input is (:func:`lburst.burst.sources.is_recording`).  Every source then
+answers the same questions: :meth:`InputSource.keyframe_bursts` (each burst with its name and
+the store's key of its features, which the source decides), :attr:`InputSource.folder` (where
+``lburst extract --out DIR`` puts its features, under ``DIR``), :meth:`InputSource.finish`
+(its scene, once read) and the defaults it gives a reconstruction: ``time_ordered`` (a
+recording's keyframes come in time order: sequential pairs with loop candidates,
+:func:`lburst.sfm.pairs.pair_plan`) and ``one_camera`` (one camera shot it: one COLMAP camera
+by default, :mod:`lburst.sfm.cameras`).  :meth:`InputSource.read` runs the features stage
+(:func:`lburst.sfm.feature_stage.keyframe_features`) over any source; every input leaves the
+same files: ``OUT/images/``, the features, ``OUT/keyframes.json`` (times) and
+``OUT/reference.json`` when there is a reference.
 """
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from lburst.burst.sources import RecordingOptions, is_recording
+from lburst import store
+from lburst.burst.io import BurstError, load_burst
+from lburst.burst.sources import Keyframe, Recording, RecordingOptions, is_recording, open_recording
 from lburst.features import Features
+from lburst.sfm import recording as rec
 from lburst.sfm.cameras import CameraPlan, camera_origin
-from lburst.sfm.feature_stage import recording_features, scene_features
+from lburst.sfm.feature_stage import KeyframeBurst, Layout, LazyExtractor, keyframe_features, safe_name, stored
 from lburst.sfm.options import ReconstructOptions
-from lburst.sfm.outputs import copy_reference, write_scene_times
-from lburst.sfm.scene import Scene, list_scene
+from lburst.sfm.outputs import IMAGES, copy_reference, write_scene_times
+from lburst.sfm.result import ReconstructionError
+from lburst.sfm.scene import Scene, SceneItem, list_scene, load_item
+
+#: ``stored(name, key)``: whether the features of ``name`` are stored under ``key``
+Stored = Callable[[str, Any], bool]
+
+
+def burst_name(path: str | Path) -> str:
+    """An input's name in outputs: the folder or file name without suffix (``.`` is the
+    current folder's name)."""
+    path = Path(os.path.abspath(path))
+    name = path.stem if path.is_file() else path.name
+    if not name or name.startswith("."):
+        raise BurstError(f"{path}: no name to give its output (a hidden or root path)")
+    return name
 
 
 @dataclass
@@ -38,42 +65,168 @@ class Keyframes:
         return self.scene, self.features, self.error
 
 
-class SceneInput:
-    """A folder of bursts or photos (:func:`lburst.sfm.scene.list_scene`), timed by index."""
+class InputSource:
+    """A source of named keyframe bursts (module docstring); subclasses say how they are read."""
 
     time_ordered = False
     one_camera = False
 
     def __init__(self, path: str | Path):
-        self.path = path
+        self.path = Path(path)
+        self.error: str | None = None  # why reading stopped early, once read
 
-    def read(self, spec: str, out: Path, opts: ReconstructOptions, extractor=None) -> Keyframes:
-        scene = list_scene(self.path)
-        if len(scene.items) < 2:
-            return Keyframes(scene, [])
-        features = scene_features(scene, spec, out, opts.progress, extractor, opts.features)
-        write_scene_times(out, str(self.path), scene.names)
-        copy_reference(scene.reference_path, out / "reference.json")
-        return Keyframes(scene, features)
+    @property
+    def folder(self) -> str:
+        """Where ``lburst extract --out DIR`` puts the features of this input, under ``DIR``."""
+        return ""
+
+    def keyframe_bursts(
+        self, method: dict[str, Any] | None = None, stored: Stored | None = None, out: Path | None = None
+    ) -> Iterator[KeyframeBurst]:
+        """The bursts, each keyed for ``method`` (:func:`lburst.store.method_key`; ``None``: no key).
+        ``stored`` says which features are stored already (a source may then skip reading);
+        ``out``: the run's folder, where a source records what it read."""
+        raise NotImplementedError
+
+    def finish(self, out: Path) -> Scene:
+        """The scene of the bursts read, its times (``OUT/keyframes.json``) and reference
+        (``OUT/reference.json``) written."""
+        raise NotImplementedError
 
     def camera_origin(self, scene: Scene, plan: CameraPlan, opts: ReconstructOptions) -> str | None:
-        return None  # a scene's report has no camera line
+        return None  # a report without a camera line
+
+    def read(self, spec: str, out: Path, opts: ReconstructOptions, extractor=None) -> Keyframes:
+        """The features stage of a reconstruction into ``out``: the features of every burst
+        (:func:`lburst.sfm.feature_stage.keyframe_features`), in ``OUT/features`` and
+        ``OUT/images``, taken from ``opts.features`` (``lburst extract``'s folder, by default
+        ``out``) where they are stored; then the scene (:meth:`finish`)."""
+        extracted = out if opts.features is None else Path(opts.features)
+        layout = Layout(out / "features", out / IMAGES, (extracted / self.folder,))
+        method = store.method_key(spec)
+        bursts = self.keyframe_bursts(method, lambda name, key: stored(layout, name, key) is not None, out)
+        named = (burst for burst in bursts if safe_name(burst.name))  # names COLMAP can store
+        done = []
+        try:
+            for extracted_burst in keyframe_features(named, LazyExtractor(spec, extractor), layout):
+                done.append(extracted_burst.features)
+        except BurstError as err:  # the input itself cannot be read
+            raise ReconstructionError(str(err)) from err
+        return Keyframes(self.finish(out), done, self.error)
 
 
-class RecordingInput(SceneInput):
-    """A video or a frame/DNG folder read once into keyframe bursts (:mod:`lburst.sfm.recording`)."""
+class BurstInput(InputSource):
+    """One burst: a folder of frames, an image or a whole video (:func:`lburst.burst.io.load_burst`)."""
+
+    def keyframe_bursts(self, method=None, stored=None, out=None) -> Iterator[KeyframeBurst]:
+        if not self.path.exists():
+            raise BurstError(f"{self.path}: no such file or folder")
+        key = None if method is None else store.key(method, self.path)
+        yield KeyframeBurst(burst_name(self.path), key, lambda: load_burst(self.path))
+
+    def finish(self, out: Path) -> Scene:
+        return Scene(self.path, (SceneItem(burst_name(self.path), self.path, "burst"),), None)
+
+
+class SceneInput(InputSource):
+    """A folder of bursts or photos (:func:`lburst.sfm.scene.list_scene`), timed by index."""
+
+    def __init__(self, path: str | Path):
+        super().__init__(path)
+        self._scene: Scene | None = None
+
+    @property
+    def scene(self) -> Scene:
+        if self._scene is None:
+            self._scene = list_scene(self.path)
+        return self._scene
+
+    def keyframe_bursts(self, method=None, stored=None, out=None) -> Iterator[KeyframeBurst]:
+        if len(self.scene.items) < 2:
+            return  # nothing to reconstruct: no features computed
+        for item in self.scene.items:
+            key = None if method is None else store.key(method, item.path)  # the burst's content: no stale features
+            yield KeyframeBurst(item.name, key, lambda item=item: load_item(item))
+
+    def finish(self, out: Path) -> Scene:
+        if len(self.scene.items) >= 2:
+            write_scene_times(out, str(self.path), self.scene.names)
+            copy_reference(self.scene.reference_path, out / "reference.json")
+        return self.scene
+
+
+class RecordingInput(InputSource):
+    """A video or a frame/DNG folder read once into keyframe bursts (:mod:`lburst.sfm.recording`).
+    Its keyframes' features are keyed by the recording's content and cut and the keyframe's
+    name (:func:`lburst.store.recording_content`), as ``lburst extract`` keys them."""
 
     time_ordered = True
     one_camera = True
 
-    def read(self, spec: str, out: Path, opts: ReconstructOptions, extractor=None) -> Keyframes:
-        return Keyframes(*recording_features(self.path, spec, out, opts, extractor))
+    def __init__(self, path: str | Path, options: RecordingOptions | None = None):
+        super().__init__(path)
+        self.options = options or RecordingOptions()
+        self.recording: Recording | None = None
+        self.keyframes: list[Keyframe] = []
+
+    @property
+    def folder(self) -> str:
+        return burst_name(self.path)  # OUT/<recording>/<keyframe>.npz
+
+    def keyframe_bursts(self, method=None, stored=None, out=None) -> Iterator[KeyframeBurst]:
+        """The keyframe bursts in time order; reading stops at a bad frame (:attr:`error`), the
+        keyframes before it kept.  With ``out``, ``OUT/keyframes.json`` records them
+        (:func:`lburst.sfm.recording.save_keyframes`), and a rerun whose keyframes are all
+        ``stored`` does not read the recording again."""
+        self.recording = recording = open_recording(self.path, self.options)
+        content = None if method is None else store.recording_content(recording)
+        whole = None if method is None else store.key(method, self.path, content)
+
+        def key(name: str) -> dict[str, Any] | None:
+            return None if method is None else store.key(method, self.path, content, keyframe=name)
+
+        listed = rec.load_keyframes(out, whole) if out is not None and stored is not None else None
+        if listed is not None and all(stored(k.name, key(k.name)) for k in listed):
+            self.keyframes = listed
+            for k in listed:
+                yield KeyframeBurst(k.name, key(k.name), self._unread(k.name), k.index, k.time)
+            return
+        self.keyframes, self.error = [], None
+        try:
+            for keyframe, burst in recording.bursts():
+                self.keyframes.append(keyframe)
+                yield KeyframeBurst(keyframe.name, key(keyframe.name), lambda b=burst: b, keyframe.index, keyframe.time)
+        except BurstError as err:
+            self.error = str(err)
+        if out is not None and whole is not None:
+            rec.save_keyframes(out, whole, recording, self.keyframes, self.error)
+
+    def _unread(self, name: str) -> Callable:
+        def load():
+            raise BurstError(f"{self.path}: keyframe {name}'s stored features went missing during the run; run again")
+
+        return load
+
+    def finish(self, out: Path) -> Scene:
+        return rec.keyframe_scene(self.recording, self.keyframes, out)
 
     def camera_origin(self, scene: Scene, plan: CameraPlan, opts: ReconstructOptions) -> str | None:
         return camera_origin(scene, plan, opts)  # where the intrinsics came from (result.json, report.md)
 
 
-def open_input(path: str | Path, options: RecordingOptions | None = None) -> SceneInput:
-    """The input at ``path``: a :class:`RecordingInput` when it is a recording
+def open_input(path: str | Path, options: RecordingOptions | None = None) -> SceneInput | RecordingInput:
+    """The input of a reconstruction at ``path``: a :class:`RecordingInput` when it is a recording
     (:func:`lburst.burst.sources.is_recording` with ``options``), else a :class:`SceneInput`."""
-    return RecordingInput(path) if is_recording(path, options) else SceneInput(path)
+    return RecordingInput(path, options) if is_recording(path, options) else SceneInput(path)
+
+
+def open_bursts(path: str | Path, options: RecordingOptions | None = None) -> BurstInput | RecordingInput:
+    """The input of ``lburst extract`` or ``lburst show`` at ``path``: a :class:`RecordingInput`
+    when it is a recording that the options cut (a folder with ``meta.json`` or DNG frames;
+    with ``options.frame_folders``, any video or frame folder), else one :class:`BurstInput`
+    (a whole video without them is one burst)."""
+    path = Path(path)
+    cut = options is not None and options.frame_folders
+    if is_recording(path, options) and (path.is_dir() or cut):
+        return RecordingInput(path, options)
+    return BurstInput(path)
