@@ -1,11 +1,13 @@
 """Homography benchmark: sequence reading, the burst protocol, an end-to-end run (metrics: test_bench_metrics.py)."""
 
+import json
+
 import cv2
 import numpy as np
 import pytest
 import skimage.data
 
-from lburst.bench.homography import NoiseLevel, noise_levels, protocol_burst, run_homography_benchmark
+from lburst.bench.homography import BenchMethod, NoiseLevel, noise_levels, protocol_burst, run_homography_benchmark
 from lburst.bench.metrics import project
 from lburst.bench.sequences import read_sequence, resize_matrix
 from lburst.noise import GaussianNoise
@@ -158,3 +160,60 @@ def test_turned_views_keep_their_geometry_and_the_table_is_written(tmp_path, deg
     assert summary["rotation_le_25"]["pairs"] == 0
     assert results["protocol"]["rotation_deg"] == deg
     assert f"turned by {deg} degrees" in (tmp_path / "out" / "results.md").read_text()
+
+
+def test_input_modes_parse_from_the_published_spellings_and_back():
+    """``gold:CKPT`` and ``oracle-merge+X`` are input modes, not name prefixes: parsed once, written
+    back as published (tables, docs), and ``--input`` gives a plain spec a mode."""
+    from lburst.bench.homography import BenchMethod, InputMode
+
+    gold = BenchMethod.parse("gold:w/R2D2.pt")
+    assert gold == BenchMethod("r2d2:w/R2D2.pt", InputMode.GOLD) and gold.name == "gold:w/R2D2.pt"
+    oracle = BenchMethod.parse("oracle-merge+r2d2:w/R2D2.pt")
+    assert oracle == BenchMethod("r2d2:w/R2D2.pt", InputMode.ORACLE_MERGE)
+    assert oracle.name == "oracle-merge+r2d2:w/R2D2.pt"
+    assert BenchMethod.parse("gold+sift") == BenchMethod("sift", InputMode.GOLD) == BenchMethod.parse("sift", "gold")
+    assert BenchMethod.parse("merge+sift") == BenchMethod("merge+sift", InputMode.BURST)  # a method, not a mode
+    assert BenchMethod.parse("oracle-merge+sift", "gold").mode is InputMode.ORACLE_MERGE  # its own mode wins
+    for method in (gold, oracle, BenchMethod("sift", InputMode.GOLD), BenchMethod("lburst")):
+        assert BenchMethod.parse(method.name) == method
+    with pytest.raises(ValueError, match="input mode 'clean' is not one of burst, gold, oracle-merge"):
+        BenchMethod.parse("sift", "clean")
+
+
+def test_each_input_mode_gives_the_method_what_it_names(tmp_path):
+    """gold: the clean image; oracle-merge: the burst's frames aligned with the true motion and
+    averaged (less noise than any one frame); burst: the burst."""
+    from lburst.bench.homography import InputMode, MethodRunner
+    from lburst.burst.motion import BurstMotion
+
+    image = cv2.resize(skimage.data.astronaut(), (96, 64))
+    shift = (2.0, 1.0)
+    noise = np.random.default_rng(0).normal(0, 20, (5, *image.shape))
+    clean = np.stack([np.roll(image, (k, 2 * k), axis=(0, 1)) for k in range(-2, 3)])
+    burst = np.clip(np.round(clean + noise), 0, 255).astype(np.uint8)
+    seen = {}
+    for mode in InputMode:
+        runner = MethodRunner(BenchMethod("sift", mode), top_k=100)
+        runner.extractor = lambda b, mode=mode: seen.setdefault(mode, b)
+        runner(image, burst, BurstMotion(shift))
+    assert seen[InputMode.GOLD].shape == (1, 64, 96, 3) and np.array_equal(seen[InputMode.GOLD][0], image)
+    assert seen[InputMode.BURST] is burst
+    merged = seen[InputMode.ORACLE_MERGE]
+
+    def error(frame):  # RMS against the clean image, inside the borders the motion uncovers
+        return np.sqrt(np.mean((frame[8:-8, 8:-8].astype(float) - image[8:-8, 8:-8]) ** 2))
+
+    assert merged.shape == (1, 64, 96, 3) and error(merged[0]) < 0.6 * error(burst[2])  # 5 frames averaged
+
+
+def test_the_command_line_input_option_runs_every_plain_spec_in_that_mode(tmp_path, capsys):
+    from lburst.cli import main
+
+    _write_sequence(tmp_path / "data" / "seq", size=(96, 128))
+    args = ["bench", "homography", str(tmp_path / "data"), "--sigma", "25", "--out", str(tmp_path / "out")]
+    assert main([*args, "--methods", "sift", "oracle-merge+sift", "--input", "gold"]) == 0
+    table = capsys.readouterr().out
+    assert "| gold+sift |" in table and "| oracle-merge+sift |" in table
+    summary = json.loads((tmp_path / "out" / "results.json").read_text())["methods"]
+    assert sorted(summary) == ["gold+sift", "oracle-merge+sift"]

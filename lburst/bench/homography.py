@@ -14,9 +14,11 @@ Protocol (reproducible by anyone):
    rotates, zooms and flows non-uniformly (:class:`lburst.burst.motion.BurstMotion`, each
    drawn uniformly up to the given per-frame maximum); such levels are labelled and
    seeded with the motion's name too.
-3. Methods: any :func:`lburst.methods.create` spec, plus ``gold:CKPT`` (the single-image
-   network on the clean image) and ``oracle-merge+X`` (frames aligned with the true
-   motion, averaged, then X).  Learned methods keep the top 5000 keypoints.
+3. Methods: any :func:`lburst.methods.create` spec, each with an input mode
+   (:class:`InputMode`, :class:`BenchMethod`): the noisy burst (``burst``), the clean image
+   (``gold``: ``gold+X``, or ``gold:CKPT`` for the single-image network ``r2d2:CKPT``), or
+   the frames aligned with the true motion and averaged (``oracle-merge``:
+   ``oracle-merge+X``); the command line's ``--input MODE`` sets it for every plain spec.  Learned methods keep the top 5000 keypoints.
 4. Mutual nearest neighbours; metrics of :mod:`lburst.bench.metrics` for the pairs
    (1, K), K = 2..6; averaged over the 5 pairs of a sequence, then over sequences.
    A second table keeps only pairs rotated by 25 degrees or less (pooled).
@@ -39,6 +41,7 @@ import hashlib
 import json
 import time
 from dataclasses import asdict, dataclass
+from enum import StrEnum
 from pathlib import Path
 
 import cv2
@@ -115,29 +118,76 @@ def oracle_merge(burst: np.ndarray, motion: BurstMotion) -> np.ndarray:
     return total / np.maximum(count, 1)
 
 
-class MethodRunner:
-    """Features of one image under the protocol for one method spec."""
+class InputMode(StrEnum):
+    """What a benchmarked method sees of a protocol burst."""
 
-    def __init__(self, spec: str, top_k: int) -> None:
+    BURST = "burst"  #: the noisy burst
+    GOLD = "gold"  #: the clean image alone (an upper bound for a single-image network)
+    ORACLE_MERGE = "oracle-merge"  #: the burst's frames aligned with the true motion and averaged
+
+
+#: how a mode is written before a method spec in ``--methods`` (and names the method's cache)
+MODE_PREFIX = {InputMode.BURST: "", InputMode.GOLD: "gold+", InputMode.ORACLE_MERGE: "oracle-merge+"}
+#: ``gold:CKPT``, the published spelling of ``gold+r2d2:CKPT`` (the single-image network of CKPT)
+GOLD_CHECKPOINT = "gold:"
+
+
+@dataclass(frozen=True)
+class BenchMethod:
+    """A method of the benchmark: a method spec (:func:`lburst.methods.create`) and its input mode."""
+
+    spec: str
+    mode: InputMode = InputMode.BURST
+
+    @classmethod
+    def parse(cls, text: str, mode: InputMode | str = InputMode.BURST) -> BenchMethod:
+        """``MODE+SPEC`` (``gold+sift``, ``oracle-merge+r2d2:W.pt``), ``gold:CKPT`` (``gold+r2d2:CKPT``),
+        or a plain ``SPEC`` in ``mode`` (the command line's ``--input``)."""
+        if text.startswith(GOLD_CHECKPOINT):
+            return cls("r2d2:" + text[len(GOLD_CHECKPOINT) :], InputMode.GOLD)
+        for prefixed, prefix in MODE_PREFIX.items():
+            if prefix and text.startswith(prefix):
+                return cls(text[len(prefix) :], prefixed)
+        try:
+            return cls(text, InputMode(mode))
+        except ValueError:
+            modes = ", ".join(m.value for m in InputMode)
+            raise LBurstValueError(f"input mode {mode!r} is not one of {modes}") from None
+
+    @property
+    def name(self) -> str:
+        """The method's name in tables: as parsed back by :meth:`parse` (``gold:CKPT`` as published)."""
+        if self.mode is InputMode.GOLD and self.spec.startswith("r2d2:"):
+            return GOLD_CHECKPOINT + self.spec[len("r2d2:") :]
+        return MODE_PREFIX[self.mode] + self.spec
+
+    @property
+    def key_prefix(self) -> str:
+        """What the store's method spec is prefixed with (as the cache has always had it)."""
+        return (
+            GOLD_CHECKPOINT if self.mode is InputMode.GOLD and self.spec.startswith("r2d2:") else MODE_PREFIX[self.mode]
+        )
+
+
+class MethodRunner:
+    """Features of one image under the protocol for one benchmark method."""
+
+    def __init__(self, method: BenchMethod | str, top_k: int) -> None:
         from lburst.methods import accepts, create
 
-        self.spec = spec
-        if spec.startswith("gold:"):
-            self.mode, prefix, inner = "gold", "gold:", "r2d2:" + spec[len("gold:") :]
-        elif spec.startswith("oracle-merge+"):
-            self.mode, prefix, inner = "oracle", "oracle-merge+", spec[len("oracle-merge+") :]
-        else:
-            self.mode, prefix, inner = "burst", "", spec
+        self.method_of = method if isinstance(method, BenchMethod) else BenchMethod.parse(method)
+        self.spec, self.mode = self.method_of.name, self.method_of.mode
+        inner = self.method_of.spec
         options = {"top_k": top_k} if accepts(inner, "top_k") else {}
         self.extractor = create(inner, **options)
         method = store.method_key(inner, **options)  # the weights' SHA-1 and the options
-        self.method = {**method, "spec": prefix + method["spec"]}
+        self.method = {**method, "spec": self.method_of.key_prefix + method["spec"]}
         self.key = self.method["spec"]  # names the feature cache's folder
 
     def __call__(self, image: np.ndarray, burst: np.ndarray, motion: BurstMotion) -> Features:
-        if self.mode == "gold":
+        if self.mode is InputMode.GOLD:
             return self.extractor(image[None])
-        if self.mode == "oracle":
+        if self.mode is InputMode.ORACLE_MERGE:
             from lburst.methods.merge import merge_burst
 
             if motion.is_translation:
@@ -221,7 +271,7 @@ def summarize(per_pair: dict[str, list[dict]], seconds: dict[str, float], kinds:
 
 def run_homography_benchmark(
     data: str | Path,
-    methods: list[str],
+    methods: list[str | BenchMethod],
     sigmas: list[float],
     out: str | Path,
     noise_specs: list[str] = (),
@@ -245,7 +295,7 @@ def run_homography_benchmark(
         raise LBurstValueError(f"every must be an integer >= 1, got {every!r}")
     folders = list_sequences(data)[::every]
     levels = noise_levels(list(sigmas), list(noise_specs), motion)
-    runners = {spec: MethodRunner(spec, top_k) for spec in methods}
+    runners = {runner.spec: runner for runner in (MethodRunner(m, top_k) for m in methods)}
     results: dict = {
         "protocol": {
             "data": str(data),

@@ -5,14 +5,27 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from lburst.bench.homography import MotionRange, markdown, run_homography_benchmark
+from lburst.bench.homography import BenchMethod, InputMode, MotionRange, markdown, run_homography_benchmark
 from lburst.cli.numbers import integer, real
 from lburst.cli.options import add_matcher_argument
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", type=Path, help="folder of sequence folders (Oxford or HPatches layout)")
-    p.add_argument("--methods", nargs="+", default=["lburst", "sift", "orb", "merge+sift"])
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        default=["lburst", "sift", "orb", "merge+sift"],
+        help="method specs; one may carry its own input mode: gold+SPEC (gold:CKPT: the single-image "
+        "network of CKPT on the clean image), oracle-merge+SPEC",
+    )
+    p.add_argument(
+        "--input",
+        choices=[m.value for m in InputMode],
+        default=InputMode.BURST.value,
+        help="what every method spec without its own mode sees: the noisy burst, the clean image (gold), "
+        "or the frames aligned with the true motion and averaged (oracle-merge)",
+    )
     p.add_argument(
         "--sigma",
         type=real(0),
@@ -68,7 +81,7 @@ def main(args: argparse.Namespace) -> int:
     motion = MotionRange(args.burst_rotation, args.burst_zoom, args.burst_flow)
     results = run_homography_benchmark(
         args.data,
-        args.methods,
+        [BenchMethod.parse(m, args.input) for m in args.methods],
         args.sigma,
         args.out,
         args.noise,
