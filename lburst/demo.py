@@ -23,7 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from lburst.burst.io import atomic_path, load_burst, read_features_npz
-from lburst.viz import new_figure
+from lburst.methods import create
+from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
+from lburst.sfm.metrics import markdown_table
+from lburst.sfm.options import ReconstructOptions
+from lburst.sfm.poses import umeyama
+from lburst.sfm.reconstruct import reconstruct_scene
+from lburst.viz import new_figure, plot_keypoints_and_maps
+from lburst.weights import weights_path
 
 
 def lburst_spec(weights: str | None) -> str:
@@ -31,7 +38,6 @@ def lburst_spec(weights: str | None) -> str:
     weights = weights or os.environ.get("LBURST_WEIGHTS")
     if weights:
         return f"lburst:{weights}"
-    from lburst.weights import weights_path
 
     weights_path("lburst-b5")  # raises a clear error when no weights are shipped
     return "lburst"
@@ -89,8 +95,6 @@ def plot_matches(
 
 def plot_trajectories(reference, results: dict, path: Path) -> None:
     """Top-down (x, y) camera centres: reference and each method's, Sim3-aligned to it."""
-    from lburst.sfm.poses import umeyama
-
     centres = reference.centers()
     names = list(centres)
     ref = np.array([centres[n] for n in names])
@@ -134,13 +138,7 @@ def run_demo(
     """The night flight with ``bursts`` bursts of ``noise``, reconstructed with each of ``methods``
     (sequential pairs, ``overlap`` next bursts, the true intrinsics fixed), and the report in
     ``out`` (module docstring); prints progress and the table."""
-    from lburst.methods import create
     from lburst.model.extractor import LBurst
-    from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
-    from lburst.sfm.metrics import markdown_table
-    from lburst.sfm.options import ReconstructOptions
-    from lburst.sfm.reconstruct import reconstruct_scene
-    from lburst.viz import plot_keypoints_and_maps
 
     out.mkdir(parents=True, exist_ok=True)
     cfg = replace(NightFlightConfig(), n_bursts=bursts, noise=noise, seed=seed)

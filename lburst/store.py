@@ -38,6 +38,7 @@ import numpy as np
 
 from lburst.burst.io import read_features_npz, write_features_npz
 from lburst.features import Features, check_features
+from lburst.methods import methods, parse_spec
 
 
 def files_sha1(files: list[Path] | tuple[Path, ...], root: Path | None = None) -> str:
@@ -84,8 +85,6 @@ def _default_options(spec: str) -> dict[str, str]:
     """The options of the method that ``spec`` runs on the burst with their default values
     (as strings), less those the spec sets itself."""
     from dataclasses import MISSING, fields
-
-    from lburst.methods import methods, parse_spec
 
     inner = parse_spec(spec)
     while inner.inner is not None:

@@ -48,16 +48,18 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from lburst import store
+from lburst import matching, store
 from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, rotation_deg
 from lburst.bench.sequences import Sequence, list_sequences, read_sequence, rotate_sequence
 from lburst.burst.io import atomic_path
 from lburst.burst.motion import BurstMotion, sample_motion
 from lburst.errors import LBurstOSError, LBurstValueError
 from lburst.features import Features
-from lburst.methods import method_slug
+from lburst.methods import accepts, create, method_slug
+from lburst.methods.merge import merge_burst
 from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
 from lburst.simulate import random_motion, simulate_burst, stable_seed
+from lburst.viz import new_figure
 
 MAX_ROTATION_DEG = 25.0
 
@@ -173,8 +175,6 @@ class MethodRunner:
     """Features of one image under the protocol for one benchmark method."""
 
     def __init__(self, method: BenchMethod | str, top_k: int) -> None:
-        from lburst.methods import accepts, create
-
         self.method_of = method if isinstance(method, BenchMethod) else BenchMethod.parse(method)
         self.spec, self.mode = self.method_of.name, self.method_of.mode
         inner = self.method_of.spec
@@ -188,8 +188,6 @@ class MethodRunner:
         if self.mode is InputMode.GOLD:
             return self.extractor(image[None])
         if self.mode is InputMode.ORACLE_MERGE:
-            from lburst.methods.merge import merge_burst
-
             if motion.is_translation:
                 k = np.arange(len(burst)) - len(burst) // 2
                 merged = merge_burst(burst, shifts=k[:, None] * np.asarray(motion.shift)[None])
@@ -231,11 +229,9 @@ def stored_features(
 
 def pair_metrics(seq: Sequence, feats: list[Features], k: int, matcher=None) -> dict:
     """Metrics of pair (1, k + 2), matched by ``matcher`` (:mod:`lburst.matching`; default mutual nearest neighbours)."""
-    from lburst.matching import create
-
     h = seq.homographies[k]
     a, b = feats[0], feats[k + 1]
-    matches = (matcher or create())(a, b)
+    matches = (matcher or matching.create())(a, b)
     errors = match_errors(h, a["keypoints"], b["keypoints"], matches)
     n_kp = (len(a["keypoints"]) + len(b["keypoints"])) / 2
     return {
@@ -287,10 +283,8 @@ def run_homography_benchmark(
     ``every`` > 1 keeps every ``every``-th sequence in name order (the first, the ``every + 1``-th, ...);
     ``rotation`` turns images 2-6 of every sequence in-plane by that many degrees
     (:func:`lburst.bench.sequences.rotate_sequence`)."""
-    from lburst.matching import create
-
     out = Path(out)
-    match = create(matcher)
+    match = matching.create(matcher)
     if not isinstance(every, int) or every < 1:
         raise LBurstValueError(f"every must be an integer >= 1, got {every!r}")
     folders = list_sequences(data)[::every]
@@ -386,8 +380,6 @@ def markdown(results: dict) -> str:
 
 def plot_mma(results: dict, path: Path) -> None:
     """MMA against threshold, one panel per noise level, one line per method."""
-    from lburst.viz import new_figure
-
     methods = results["methods"]
     levels = list(next(iter(methods.values())).keys())
     fig = new_figure((4.5 * len(levels), 4))

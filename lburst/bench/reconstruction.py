@@ -25,6 +25,10 @@ from typing import Any
 from lburst.burst.io import atomic_path, file_sha1
 from lburst.methods import method_slug
 from lburst.methods.learned import results_key
+from lburst.sfm.inputs import open_input
+from lburst.sfm.metrics import aggregate, evaluate_against_reference
+from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP, ReconstructOptions
+from lburst.sfm.reconstruct import reconstruct_scene
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult
 from lburst.sfm.scene import REFERENCE_FILE
 from lburst.store import files_sha1
@@ -36,8 +40,6 @@ REFERENCE_KEYS = ("reference_source", "reference_sha1", "precision", "precision_
 
 def evaluate(result, reference: Path) -> None:
     """Replace ``result``'s reference metrics by those against ``reference`` (a ``reference.json``) and save it."""
-    from lburst.sfm.metrics import evaluate_against_reference
-
     result.metrics = {
         k: v for k, v in result.metrics.items() if k not in REFERENCE_KEYS and not k.startswith(("ate_", "rpe_"))
     }
@@ -66,9 +68,6 @@ def run_key(scene: Path, options: dict[str, Any]) -> dict[str, Any]:
     a recording (as :func:`lburst.sfm.pairs.pair_plan` sets it), so a scene's finished runs
     from when ``--overlap`` defaulted to 10 are still the same run."""
     if "overlap" in options and options["overlap"] is None:
-        from lburst.sfm.inputs import open_input
-        from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
-
         time_ordered = open_input(scene, options.get("recording")).time_ordered
         options = {**options, "overlap": RECORDING_OVERLAP if time_ordered else SCENE_OVERLAP}
     return {"scene": scene_sha1(scene), "options": {k: str(v) for k, v in sorted(options.items()) if k != "progress"}}
@@ -83,9 +82,6 @@ def _stored_key(out: Path) -> dict[str, Any] | None:
 
 def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
     """The table row of one method on one scene (from ``result.json`` when already done)."""
-    from lburst.sfm.options import ReconstructOptions
-    from lburst.sfm.reconstruct import reconstruct_scene
-
     row: dict[str, Any] = {"method": spec, "scene": scene.name, "out": str(out)}
     done = out / RESULT_FILE
     key = run_key(scene, options) if scene.exists() else None
@@ -126,8 +122,6 @@ def run_benchmark(
     scenes: list[str | Path], methods: list[str], out_dir: str | Path, force: bool = False, **options: Any
 ) -> dict[str, Any]:
     """Run every method on every scene; return ``{"rows": [...], "means": [...]}`` (also written to ``OUT/results.json``)."""
-    from lburst.sfm.metrics import aggregate
-
     out_dir = Path(out_dir)
     rows = []
     for spec in methods:

@@ -12,6 +12,7 @@ import numpy as np
 
 from lburst.burst.io import IMAGE_SUFFIXES, BurstError, read_image, to_uint8
 from lburst.errors import LBurstFileNotFoundError, LBurstValueError
+from lburst.rotation import rotate_image
 
 
 @dataclass
@@ -94,8 +95,6 @@ def read_sequence(folder: str | Path, max_side: int | None = None) -> Sequence:
 def rotate_sequence(seq: Sequence, deg: float) -> Sequence:
     """``seq`` with images 2-6 turned in-plane by ``deg`` about their centre
     (:func:`lburst.rotation.rotate_image`), and the homographies composed with the turn."""
-    from lburst.rotation import rotate_image
-
     if float(deg) == 0:
         return seq
     turned = [rotate_image(im, deg) for im in seq.images[1:]]

@@ -12,6 +12,7 @@ import os
 import sys
 import warnings
 
+import lburst
 from lburst.errors import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, LBurstError
 
 # (subcommand words, module, one-line help)
@@ -81,8 +82,6 @@ def _version() -> str:
     try:
         return version("lburst")
     except PackageNotFoundError:
-        import lburst
-
         return lburst.__version__
 
 

@@ -9,6 +9,7 @@ from lburst.bench.reconstruction import run_benchmark
 from lburst.burst.io import atomic_path
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
+from lburst.sfm.metrics import markdown_table
 from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
 
 
@@ -38,8 +39,6 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from lburst.sfm.metrics import markdown_table
-
     report = run_benchmark(
         args.scenes,
         args.methods,

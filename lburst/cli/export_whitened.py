@@ -8,6 +8,7 @@ from pathlib import Path
 
 from lburst.cli.numbers import integer, real
 from lburst.paths import shared_dir
+from lburst.train.whitening import sample_photos, whiten_checkpoint
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -26,8 +27,6 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from lburst.train.whitening import sample_photos, whiten_checkpoint
-
     photos = sample_photos(args.photos or [args._default_photos], args.count, args.seed)
     whiten_checkpoint(args.checkpoint, args.out, photos, seed=args.seed, power=args.power)
     print(f"wrote {args.out} (descriptor statistics of {len(photos)} training photos)")

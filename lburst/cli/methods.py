@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from lburst import matching, methods
 from lburst.errors import LBurstValueError
 from lburst.methods.options import format_default, option_table
 
@@ -24,8 +25,6 @@ def _entry(form: str, summary: str, options: type | None) -> list[str]:
 
 def listing(name: str | None = None) -> str:
     """The text of ``lburst methods [NAME]``."""
-    from lburst import matching, methods
-
     out = ["Feature methods (--method SPEC: NAME[:ARG][,KEY=VALUE...]; a wrapper: NAME[,KEY=VALUE]+SPEC):"]
     for info in methods.methods():
         if name in (None, info.name):
@@ -43,8 +42,6 @@ def listing(name: str | None = None) -> str:
 
 
 def main(args: argparse.Namespace) -> int:
-    from lburst import matching, methods
-
     known = set(methods.available()) | {m.name for m in matching.available()}
     if args.name is not None and args.name not in known:
         raise LBurstValueError(f"unknown method or matcher {args.name!r}; known: {', '.join(sorted(known))}")

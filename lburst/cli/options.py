@@ -71,7 +71,6 @@ def recording_options(args) -> RecordingOptions:
 
 def matcher_spec(spec: str) -> str:
     """``spec`` if it names a valid matcher with valid options (an argparse ``type``)."""
-
     try:
         create(spec)
     except ValueError as exc:

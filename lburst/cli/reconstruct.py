@@ -9,6 +9,7 @@ from pathlib import Path
 from lburst.cli.numbers import integer, real
 from lburst.cli.options import add_matcher_argument, add_recording_arguments, recording_options
 from lburst.errors import RunFailed
+from lburst.sfm.metrics import markdown_table
 from lburst.sfm.options import (
     AUTO_EXHAUSTIVE_MAX,
     LOOP_FRACTION,
@@ -145,7 +146,6 @@ def main(args: argparse.Namespace) -> int:
             features=args.features,
         ),
     )
-    from lburst.sfm.metrics import markdown_table
 
     print(markdown_table([{"method": result.method, "scene": Path(result.scene).name, **result.metrics}]))
     if result.status == Status.COLMAP_FAILED:

@@ -11,6 +11,7 @@ from lburst.cli.numbers import integer
 from lburst.model.extractor import LBurst
 from lburst.sfm.inputs import burst_name, open_bursts
 from lburst.viz import plot_keypoints_and_maps
+from lburst.weights import resolve_weights
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -37,8 +38,6 @@ def load_model(weights: str | None, frame_order: str = "temporal", device: str |
 
     weights = weights or os.environ.get("LBURST_WEIGHTS")
     if weights:
-        from lburst.weights import resolve_weights
-
         return LBurst.from_checkpoint(resolve_weights(weights), device=device, frame_order=frame_order)
     return LBurst.pretrained("lburst-b5", device=device)
 

@@ -7,14 +7,13 @@ from pathlib import Path
 
 from lburst.burst.io import read_image, save_burst
 from lburst.cli.numbers import integer, real
+from lburst.extras import require
 from lburst.noise import noise_from_spec
 from lburst.simulate import simulate_burst
 
 
 def default_photo():
     """A photo scikit-image ships (so the command runs with no data)."""
-    from lburst.extras import require
-
     return require("skimage.data", "the default photo (give IMAGE instead)").astronaut()
 
 

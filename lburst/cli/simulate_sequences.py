@@ -9,6 +9,7 @@ from pathlib import Path
 from lburst.bench.validation import make_validation_sequences
 from lburst.cli.numbers import integer
 from lburst.paths import shared_dir
+from lburst.train.data import list_photos
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -30,8 +31,6 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from lburst.train.data import list_photos
-
     photos = list_photos(args.photos or [args._default_photos], split=args.split)
     folders = make_validation_sequences(photos, args.out, args.seed)
     print(f"{len(folders)} sequences in {args.out}")

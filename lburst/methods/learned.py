@@ -8,12 +8,15 @@ from typing import Literal
 
 import numpy as np
 
+from lburst.burst.io import file_sha1
 from lburst.errors import LBurstValueError
-from lburst.features import Features
+from lburst.features import Features, concatenate, select, spread_top_k
 from lburst.methods import register
+from lburst.methods import weights_file as method_weights
 from lburst.model.extractor import ROTATIONS, LBurst, MultiScaleConfig
 from lburst.model.network import autocast_dtype
 from lburst.model.runtimes import RUNTIMES
+from lburst.weights import resolve_weights, weights_path
 
 DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "lburst-lite": "lburst-b5-lite", "r2d2": "lburst-b1"}
 
@@ -25,16 +28,12 @@ def weights_file(spec: str) -> Path | None:
     ``CKPT`` the shipped weights.  Caches of results key on this file's content, so that
     a checkpoint retrained in place (or new shipped weights) is not served stale results.
     """
-    from lburst.methods import weights_file as method_weights
-
     return method_weights(spec)
 
 
 def results_key(spec: str) -> str:
     """``spec``, plus ``@`` and 12 hex digits of the SHA-1 of the weights it loads, if any
     (the name under which benchmarks cache its results)."""
-    from lburst.burst.io import file_sha1
-
     path = weights_file(spec)
     return f"{spec}@{file_sha1(path)[:12]}" if path is not None and path.is_file() else spec
 
@@ -115,7 +114,6 @@ class LearnedExtractor:
     def __call__(self, burst: np.ndarray) -> Features:
         if not self.spread or self.top_k is None:
             return self.model.extract(burst, top_k=self.top_k, rotations=self.rotations, **self.options)
-        from lburst.features import concatenate, select, spread_top_k
 
         every = self.model.extract(burst, top_k=None, rotations=self.rotations, **self.options)
         size = (burst.shape[2], burst.shape[1])
@@ -129,8 +127,6 @@ class LearnedExtractor:
 
 
 def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtractor:
-    from lburst.weights import resolve_weights
-
     model = (
         LBurst.from_checkpoint(
             resolve_weights(arg), device=options.device, frame_order=options.frame_order, runtime=options.runtime
@@ -143,8 +139,6 @@ def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtr
 
 def _weights(default: str):
     def weights(arg: str | None) -> Path:
-        from lburst.weights import resolve_weights, weights_path
-
         return resolve_weights(arg) if arg else weights_path(default)
 
     return weights

@@ -29,13 +29,17 @@ from lburst.model.lite import LiteNet
 from lburst.model.network import (
     WHITENING_KEYS,
     LBurstNet,
+    autocast_dtype,
     check_device,
     check_float_burst,
     check_precision,
     load_checkpoint,
     normalize_burst,
 )
+from lburst.model.onnx import OnnxRunner
 from lburst.model.runtimes import choose_runtime, inference_form, make_runner
+from lburst.rotation import map_points, rotate_image, rotation_map, turn_burst
+from lburst.weights import weights_path
 
 ROTATIONS = (1, 2, 4, 8)  # extraction at 0; 0 and 180; every quarter turn; every 45 degrees (LBurst.extract)
 
@@ -77,8 +81,6 @@ class MultiScaleConfig:
     def __post_init__(self) -> None:
         """``ValueError`` naming the field for any value outside its range (every use of
         the settings goes through here, so no loop below can run away)."""
-        from lburst.model.network import autocast_dtype
-
         for name in ("min_size", "max_size"):
             value = getattr(self, name)
             if not _is_int(value) or value < 1:
@@ -371,8 +373,6 @@ class LBurst:
     @classmethod
     def from_onnx(cls, path: str | Path, frame_order: str = "temporal", threads: int | None = None) -> "LBurst":
         """Run a model exported by ``lburst export onnx`` with ONNX Runtime (CPU)."""
-        from lburst.model.onnx import OnnxRunner
-
         runner = OnnxRunner(path, threads=threads)
         return cls(
             None,
@@ -437,8 +437,6 @@ class LBurst:
         ``'lburst-b5-lite'`` (the light network: several times faster, run by the fastest
         runtime of the CPU) or ``'lburst-b1'`` (single images).  ``runtime``, ``threads``:
         as :meth:`from_checkpoint`."""
-        from lburst.weights import weights_path
-
         return cls.from_checkpoint(weights_path(name), device, runtime=runtime, threads=threads)
 
     def _input(self, burst: np.ndarray, cfg: MultiScaleConfig | None = None) -> tuple[torch.Tensor, float]:
@@ -574,8 +572,6 @@ class LBurst:
         return self._extract(x, cfg, self._full_size(burst), scale)
 
     def _extract_turned(self, burst: np.ndarray, top_k: int | None, rotations: int, **options) -> Features:
-        from lburst.rotation import map_points, rotate_image, rotation_map, turn_burst
-
         if rotations not in ROTATIONS:
             raise LBurstValueError(f"rotations must be one of {ROTATIONS}, got {rotations!r}")
         burst = np.asarray(burst)

@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lburst.burst.io import atomic_path
 from lburst.errors import LBurstValueError
 from lburst.model.lite import LITE_NAME, LiteConfig, LiteNet
 from lburst.model.precision import (  # noqa: F401  (re-exported)
@@ -322,8 +323,6 @@ def checkpoint_dict(net: LBurstNet | LiteNet) -> dict:
 
 def write_checkpoint(checkpoint: dict, path: str | Path) -> None:
     """``torch.save`` of ``checkpoint`` (weights, or a training state) to ``path``, atomically."""
-    from lburst.burst.io import atomic_path
-
     with atomic_path(path) as tmp:
         torch.save(checkpoint, tmp)
 

@@ -49,7 +49,8 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 import torch
 
-from lburst.burst.io import IMAGE_SUFFIXES
+from lburst.burst.align import align_burst
+from lburst.burst.io import IMAGE_SUFFIXES, atomic_path, decode_file
 from lburst.errors import LBurstFileNotFoundError, LBurstOSError, LBurstValueError
 from lburst.extras import require
 from lburst.model.fast import FastLBurstNet, pad_maps
@@ -57,9 +58,21 @@ from lburst.model.lite import LiteNet
 from lburst.model.network import (
     CheckpointError,
     LBurstNet,
+    normalize_burst,
 )
-from lburst.model.onnx import INPUT_NAME, OUTPUT_NAMES, meta_props, parse_meta
+from lburst.model.onnx import (
+    INPUT_NAME,
+    OUTPUT_NAMES,
+    OnnxRunner,
+    export_network_onnx,
+    exported_module,
+    meta_props,
+    parse_meta,
+)
 from lburst.model.precision import NATIVE_BF16_FLAGS, cpu_flags
+from lburst.noise import GaussianNoise, LowLightNoise
+from lburst.paths import shared_dir
+from lburst.simulate import random_motion, simulate_burst
 
 #: every runtime name, in the order of ``scripts/runtime_speed.py``'s table
 RUNTIMES = (
@@ -189,7 +202,6 @@ def openvino_model(source: str | Path | LBurstNet | LiteNet, meta: dict | None =
             return ov.Core().read_model(str(path))
         except Exception as exc:
             raise CheckpointError(f"{path}: not a readable ONNX or OpenVINO model ({exc})") from exc
-    from lburst.model.onnx import exported_module
 
     module = exported_module(source)
     channels = source.config.in_channels
@@ -308,8 +320,6 @@ class OpenVinoRunner:
 
 def default_photo_folder() -> Path:
     """``$LBURST_SHARED/data/train`` (default ``../shared/data/train``), the training photos."""
-    from lburst.paths import shared_dir
-
     return shared_dir() / "data" / "train"
 
 
@@ -347,12 +357,6 @@ def calibration_bursts(
     network's training recipe, ``lburst train --preset lite``); it is then aligned (``align``,
     as the light weights read their input) and normalised."""
     import cv2
-
-    from lburst.burst.align import align_burst
-    from lburst.burst.io import decode_file
-    from lburst.model.network import normalize_burst
-    from lburst.noise import GaussianNoise, LowLightNoise
-    from lburst.simulate import random_motion, simulate_burst
 
     if photos is None or isinstance(photos, (str, Path)):
         photos = training_photos(photos)
@@ -433,8 +437,6 @@ def quantize_onnx(onnx_path: str | Path, out: str | Path, calibration: Sequence[
     from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
-    from lburst.burst.io import atomic_path
-
     items = [np.ascontiguousarray(x.detach().cpu().numpy(), dtype=np.float32) for x in calibration]
     if not items:
         raise LBurstValueError("no calibration data")
@@ -496,7 +498,6 @@ def make_runner(
         if runtime == "openvino-int8":
             model = quantize_openvino(model, calibration)
         return OpenVinoRunner(model, threads=threads, precision="bf16" if runtime == "openvino-bf16" else "fp32")
-    from lburst.model.onnx import OnnxRunner, export_network_onnx
 
     folder = Path(workdir) if workdir is not None else Path(tempfile.mkdtemp(prefix="lburst-runtime-"))
     folder.mkdir(parents=True, exist_ok=True)

@@ -49,6 +49,7 @@ from lburst.burst.sources import ground_truth_path, meta_path
 from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.noise import LowLightNoise, SensorNoise, noise_from_spec
+from lburst.scenes.dng import mosaic, write_dng
 from lburst.scenes.night_flight import NightFlightConfig, camera_pose, make_city, render_view
 from lburst.scenes.raycast import intrinsics
 from lburst.tum import write_tum
@@ -141,8 +142,6 @@ def write_flight_video(path: str | Path, cfg: NightFlightConfig, crf: int = 16, 
 def camera_frame(cfg: NightFlightConfig, radiance: np.ndarray, j: int) -> np.ndarray:
     """Frame ``j`` as the camera delivers it, 8-bit RGB ``(H, W, 3)`` (module docstring): with a
     sensor noise model the camera's processing of the raw frame, else the noisy rendering rounded."""
-    from lburst.noise import noise_from_spec
-
     noise = noise_from_spec(cfg.noise)
     if isinstance(noise, RAW_SENSORS):
         return camera_isp(raw_frame(cfg, radiance, np.random.default_rng([cfg.seed, 3, j]))[0], noise)
@@ -178,8 +177,6 @@ def _frame_folder(folder: str | Path, cfg: NightFlightConfig, kind: str) -> Path
 
 def raw_frame(cfg: NightFlightConfig, radiance: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, int]:
     """Bayer raw counts ``(H, W)`` uint16 (black level included) of a radiance image, and the white level."""
-    from lburst.scenes.dng import mosaic
-
     sensor = noise_from_spec(cfg.noise)
     if not isinstance(sensor, RAW_SENSORS):
         raise LBurstValueError(
@@ -215,8 +212,6 @@ def camera_isp(cfa: np.ndarray, sensor: LowLightNoise | SensorNoise) -> np.ndarr
 def write_flight_dng(folder: str | Path, cfg: NightFlightConfig, progress: bool = True) -> Path:
     """Render the flight as DNG frames in ``folder`` (module docstring); frames already there are kept
     (resume), a folder made with another configuration is refused with ``ValueError``."""
-    from lburst.scenes.dng import write_dng
-
     sensor = noise_from_spec(cfg.noise)
     if not isinstance(sensor, RAW_SENSORS):
         raise LBurstValueError(

@@ -41,6 +41,7 @@ from scipy.spatial.transform import Rotation
 
 from lburst.burst.io import atomic_path, save_burst
 from lburst.errors import LBurstValueError
+from lburst.noise import noise_from_spec
 from lburst.numbers import check_integer, check_real
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
 from lburst.scenes.raycast import cast, intrinsics, rays_through
@@ -346,7 +347,6 @@ def view_overlaps(
 def _noise(spec: str) -> Noise | None:
     if spec in ("", "none"):
         return None
-    from lburst.noise import noise_from_spec
 
     return noise_from_spec(spec)
 

@@ -33,9 +33,13 @@ import numpy as np
 from tqdm import tqdm
 
 from lburst.burst.io import atomic_path, frame_name, save_burst
+from lburst.noise import noise_from_spec
 from lburst.scenes.reference import Reference
+from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.poses import path_length
+from lburst.sfm.reconstruct import reconstruct_scene
 from lburst.sfm.scene import SceneError, list_scene, read_image, save_reference
+from lburst.simulate import random_motion, simulate_burst, stable_seed
 
 REFERENCE_METHOD = "sift"
 REFERENCE_SOURCE = "sift-clean"
@@ -65,9 +69,6 @@ def pinhole(camera: dict) -> dict:
 
 def make_reference(photos: Path, scene_dir: Path, progress: bool = True, **options) -> Reference | None:
     """Reconstruct the clean photos with SIFT and save ``scene_dir/reference.json``; ``None`` if nothing registered."""
-    from lburst.sfm.options import ReconstructOptions
-    from lburst.sfm.reconstruct import reconstruct_scene
-
     opts = ReconstructOptions(progress=progress, **options)
     result = reconstruct_scene(photos, REFERENCE_METHOD, scene_dir / REFERENCE_DIR, opts)
     with atomic_path(scene_dir / REFERENCE_DIR / REFERENCE_OPTIONS_FILE) as tmp:
@@ -85,8 +86,6 @@ def make_reference(photos: Path, scene_dir: Path, progress: bool = True, **optio
 def non_default_options(options: dict) -> dict:
     """``options`` without the fields equal to :class:`lburst.sfm.ReconstructOptions`' defaults."""
     from dataclasses import MISSING, fields
-
-    from lburst.sfm.options import ReconstructOptions
 
     defaults = {f.name: f.default for f in fields(ReconstructOptions) if f.default is not MISSING}
     return {k: v for k, v in options.items() if k not in defaults or defaults[k] != v}
@@ -114,9 +113,6 @@ def simulate_scene(
     Bursts already written with ``frames`` frames are kept (a re-run resumes), and so is a
     clean-SIFT reference made with the same ``reference_options``.
     """
-    from lburst.noise import noise_from_spec
-    from lburst.simulate import random_motion, simulate_burst, stable_seed
-
     photos, out = Path(photos), Path(out)
     items = [item for item in list_scene(photos).items if item.kind == "image"]
     if not items:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from lburst import store
+from lburst import methods, store
 from lburst.burst.io import BurstError, file_sha1
 from lburst.features import Features, check_features
 from lburst.sfm.outputs import write_common_frame
@@ -147,7 +147,5 @@ class LazyExtractor:
 
     def __call__(self, burst) -> Features:
         if self.extractor is None:
-            from lburst.methods import create  # loads torch: only when a burst needs computing
-
-            self.extractor = create(self.spec)
+            self.extractor = methods.create(self.spec)  # torch, for a learned method: only when a burst needs it
         return check_features(self.extractor(burst))

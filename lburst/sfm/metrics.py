@@ -36,8 +36,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from lburst.burst.io import file_sha1
+from lburst.sfm.colmap import pycolmap
 from lburst.sfm.poses import path_length, trajectory_errors
 from lburst.sfm.reference import Reference
+from lburst.sfm.scene import reference_cameras
 
 
 class Reconstruction(Protocol):
@@ -107,8 +109,6 @@ def epipolar_distances(
     point's distance to the epipolar line of its partner is measured in the normalised
     image plane and scaled by that camera's mean focal length; the larger is returned.
     """
-    from lburst.sfm.colmap import pycolmap  # cv2 is loaded first there
-
     cam_a = pycolmap.Camera({k: camera_a[k] for k in ("model", "width", "height", "params")})
     cam_b = pycolmap.Camera({k: camera_b[k] for k in ("model", "width", "height", "params")})
     if len(points_a) == 0:
@@ -185,8 +185,6 @@ def evaluate_against_reference(
     """
     out: dict[str, Any] = {}
     if not isinstance(reference, Reference):
-        from lburst.sfm.scene import reference_cameras
-
         out["reference_sha1"] = file_sha1(reference)
         cameras = cameras or reference_cameras(reference)
         reference = Reference.load(reference)

@@ -33,6 +33,10 @@ from pathlib import Path
 import numpy as np
 
 from lburst.burst.io import atomic_path, to_uint8, write_features_h5, write_image
+from lburst.matching import similarity
+from lburst.sfm.metrics import markdown_table
+from lburst.sfm.poses import umeyama
+from lburst.sfm.reference import Reference
 from lburst.sfm.result import ReconstructionResult, Status
 from lburst.tum import write_tum
 
@@ -77,8 +81,6 @@ def keyframe_times(out: Path) -> dict[str, float]:
 def write_reference_tum(result: ReconstructionResult, times: dict[str, float], path: Path) -> Path | None:
     """The reference poses (``OUT/reference.json``) of the scene's images as a TUM file, timed as
     ``trajectory.tum``; ``None`` (and no file) without a reference."""
-    from lburst.sfm.reference import Reference
-
     reference_path = Path(result.out_dir) / "reference.json"
     if not reference_path.is_file():
         path.unlink(missing_ok=True)
@@ -117,8 +119,6 @@ def write_hloc(
     (:func:`lburst.matching.similarity`)."""
     import h5py
 
-    from lburst.matching import similarity
-
     files = [f"{n}.png" for n in names]
     with atomic_path(out / "features.h5") as tmp:
         tmp.unlink()  # h5py appends to an existing file; start from none
@@ -146,9 +146,6 @@ def _plot_trajectory(result: ReconstructionResult, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from lburst.sfm.poses import umeyama
-    from lburst.sfm.reference import Reference
 
     est = {n: -np.asarray(R).T @ np.asarray(t) for n, (R, t) in result.poses.items()}
     ref_path = Path(result.out_dir) / "reference.json"
@@ -203,8 +200,6 @@ def _plot_registration(names: list[str], points: dict[str, int], path: Path) -> 
 
 
 def write_report(result: ReconstructionResult, times: dict[str, float], path: Path) -> None:
-    from lburst.sfm.metrics import markdown_table
-
     out = Path(result.out_dir)
     summary_path = out / "colmap" / "output.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}

@@ -38,6 +38,7 @@ from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import write_outputs
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs, pair_plan
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult, Status, ended
+from lburst.sfm.retrieval import retrieval_pairs, vlad
 from lburst.sfm.scene import SceneError
 
 __all__ = [
@@ -103,8 +104,6 @@ def reconstruct_scene(
     pairs = make_pairs(n, mode, plan.overlap)
     loop_candidates: set[tuple[int, int]] = set()
     if plan.retrieval and mode == "sequential":
-        from lburst.sfm.retrieval import retrieval_pairs, vlad
-
         loops = retrieval_pairs(
             vlad([f["descriptors"] for f in features], seed=opts.seed), plan.retrieval, plan.overlap
         )

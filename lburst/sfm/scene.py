@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.burst.io import IMAGE_SUFFIXES, natural_key
+from lburst.burst.io import IMAGE_SUFFIXES, BurstError, atomic_path, load_burst, natural_key
+from lburst.burst.io import read_image as read_rgb
 from lburst.errors import LBurstValueError
 from lburst.sfm.reference import Reference
 
@@ -93,9 +94,6 @@ def list_scene(root: str | Path) -> Scene:
 
 def read_image(path: Path) -> np.ndarray:
     """An image file as RGB ``(H, W, 3)`` uint8 or uint16; ``SceneError`` naming the file if unreadable."""
-    from lburst.burst.io import BurstError
-    from lburst.burst.io import read_image as read_rgb
-
     try:
         return read_rgb(path)
     except BurstError as err:
@@ -109,7 +107,6 @@ def load_item(item: SceneItem) -> np.ndarray:
     """
     if item.kind == "image":
         return read_image(item.path)[None]
-    from lburst.burst.io import BurstError, load_burst
 
     try:
         return load_burst(item.path)
@@ -133,8 +130,6 @@ def reference_cameras(path: str | Path) -> dict[str, dict]:
 
 def save_reference(reference: Reference, path: str | Path, cameras: dict[str, dict] | None = None) -> None:
     """Write ``reference.json`` atomically, with per-image ``cameras`` when given."""
-    from lburst.burst.io import atomic_path
-
     data = reference.to_json()
     if cameras:
         data["cameras"] = {name: _camera_json(cam) for name, cam in cameras.items()}

@@ -57,6 +57,7 @@ from lburst.train.losses import (
 )
 from lburst.train.memory import check_step_memory
 from lburst.train.pairs import PairConfig
+from lburst.weights import resolve_weights
 
 LOG_FIELDS = (
     "step",
@@ -252,8 +253,6 @@ def device_memory_limit(device: torch.device) -> int | None:
 
 def load_teacher(spec: str, frames: int, device: torch.device) -> torch.nn.Module:
     """The frozen teacher network named by ``spec`` (a checkpoint file or a shipped name)."""
-    from lburst.weights import resolve_weights
-
     teacher, _ = load_checkpoint(resolve_weights(spec), device)
     if teacher.config.frames != frames:
         raise LBurstValueError(

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lburst.burst.align import warp_frame
 from lburst.burst.motion import BurstMotion
 from lburst.errors import LBurstValueError
 from lburst.noise import IMAGENET_STD, LowLightNoise, sensor_from_spec
@@ -232,8 +233,6 @@ def _estimated_shifts(motion: BurstMotion, cfg: PairConfig, rng: np.random.Gener
 
 def _align(frames: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """Frames warped back by ``shifts`` (``out(p) = frame(p + shift)``), rounded and clipped."""
-    from lburst.burst.align import warp_frame
-
     out = frames.copy()
     for i, shift in enumerate(shifts):
         if np.any(shift != 0):

@@ -35,14 +35,13 @@ from lburst.model.extractor import LBurst
 from lburst.model.network import load_checkpoint, save_checkpoint
 from lburst.noise import GaussianNoise
 from lburst.simulate import simulate_burst
+from lburst.train.data import list_photos
 
 EPS = 0.01  # eigenvalue floor, as a fraction of the mean eigenvalue
 
 
 def sample_photos(folders: Sequence[str | Path], count: int, seed: int = 0) -> list[Path]:
     """``count`` training photos of ``folders`` (never the validation tenth), drawn by ``seed``, sorted."""
-    from lburst.train.data import list_photos
-
     if count < 1:
         raise LBurstValueError(f"count must be at least 1, got {count}")
     photos = list_photos(list(folders), split="train")
