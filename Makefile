@@ -23,7 +23,7 @@ test: $(STAMP)
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow
-	LBURST_HYPOTHESIS_EXAMPLES=2000 $(PY) -m pytest -q tests/test_properties.py tests/test_numeric_options.py
+	LBURST_HYPOTHESIS_EXAMPLES=2000 $(PY) -m pytest -q tests/test_properties.py tests/cli/test_numeric_options.py
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -1,4 +1,4 @@
-"""Run by tests/test_train_loop.py under torchrun: a tiny data-parallel training run on the CPU."""
+"""Run by tests/train/test_train_loop.py under torchrun: a tiny data-parallel training run on the CPU."""
 
 import sys
 

@@ -125,7 +125,7 @@ def test_the_exit_codes_are_documented_in_help_and_readme():
 
     text = build_parser().format_help()
     assert "exit status:" in text and '"lburst COMMAND: error: MESSAGE"' in text
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
     section = readme[readme.index("## Command line") :]
     section = section[: section.index("\n## ", 3)]
     assert "lburst COMMAND: error: MESSAGE" in section

@@ -117,7 +117,7 @@ def test_the_readme_hloc_snippet_reads_a_reconstruction_as_hloc_does(estimated):
     does (a group per image with keypoints, descriptors (D, K), scores; a group per pair
     "name0/name1" with matches0 and matching_scores0), run on a reconstruction's output."""
     out, _, _ = estimated
-    section = (Path(__file__).parents[1] / "docs" / "your_data.md").read_text()
+    section = (Path(__file__).parents[2] / "docs" / "your_data.md").read_text()
     (code,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
     scope: dict = {}
     exec(compile(code.replace('Path("night_video")', f"Path({str(out)!r})"), "your_data.md", "exec"), scope)

@@ -10,7 +10,7 @@ import pytest
 pytest.importorskip("onnxruntime")
 pytest.importorskip("onnxscript")
 
-DOC = Path(__file__).parents[1] / "docs" / "onnx.md"
+DOC = Path(__file__).parents[2] / "docs" / "onnx.md"
 
 
 def _snippet() -> str:

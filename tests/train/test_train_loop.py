@@ -187,7 +187,7 @@ def test_two_process_data_parallel_run_logs_the_mean_of_each_ranks_share(photos,
     import sys
     from pathlib import Path
 
-    helper = Path(__file__).parent / "helpers" / "ddp_train.py"
+    helper = Path(__file__).parents[1] / "helpers" / "ddp_train.py"
     cmd = [
         sys.executable,
         "-m",

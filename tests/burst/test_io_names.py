@@ -50,7 +50,7 @@ def test_extract_on_a_folder_whose_name_is_not_utf8_does_not_crash(tmp_path):
 
 def test_no_module_hands_opencv_a_raw_path():
     """Only :mod:`lburst.burst.io` calls OpenCV with a file name, and only through ``opencv_path``."""
-    root = Path(__file__).resolve().parents[1] / "lburst"
+    root = Path(__file__).resolve().parents[2] / "lburst"
     raw = re.compile(r"cv2\.(imread|imwrite|imreadmulti|VideoCapture|VideoWriter)\((?!opencv_path\()")
     offenders = [
         f"{path.relative_to(root)}:{n}"

@@ -52,7 +52,7 @@ def test_video_reconstructs_and_evo_agrees(video, tmp_path):
     assert np.allclose(times, np.arange(0, 97, 16) / 20)
     for name in ("colmap/model/images.bin", "colmap/model.ply", "report.md", "trajectory.png", "registration.png"):
         assert (out / name).stat().st_size > 0
-    shared = result.metrics["first_last_points3D"]  # counted in the model: tests/test_loop_pairs.py
+    shared = result.metrics["first_last_points3D"]  # counted in the model: tests/sfm/test_loop_pairs.py
     assert isinstance(shared, int) and f"keyframes share {shared} 3D points" in (out / "report.md").read_text()
     timing = json.loads((out / "colmap" / "output.json").read_text())
     assert timing["verify_seconds"] >= 0 and timing["map_seconds"] > 0  # the COLMAP stages' wall times
