@@ -36,7 +36,6 @@ from lburst.burst.io import (
 )
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_recording_arguments, recording_options
-from lburst.errors import LBurstError
 from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
 from lburst.model.runtimes import RUNTIMES
@@ -212,7 +211,7 @@ def main(args: argparse.Namespace) -> int:
                     "extract one of them into another --out"
                 )
             new, old = extract_input(source, extractor, args, method, finished)
-        except (LBurstError, ValueError, OSError, RuntimeError) as exc:
+        except (BurstError, ValueError, OSError, RuntimeError) as exc:  # a missing extra (ImportError) ends the run
             failed.append((path, str(exc)))
             tqdm.write(f"skipped {exc if str(exc).startswith(str(path)) else f'{path}: {exc}'}", file=sys.stderr)
             continue

@@ -21,6 +21,7 @@ same files: ``OUT/images/``, the features, ``OUT/keyframes.json`` (times) and
 from __future__ import annotations
 
 import os
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,7 +66,7 @@ class Keyframes:
         return self.scene, self.features, self.error
 
 
-class InputSource:
+class InputSource(ABC):
     """A source of named keyframe bursts (module docstring); subclasses say how they are read."""
 
     time_ordered = False
@@ -80,18 +81,18 @@ class InputSource:
         """Where ``lburst extract --out DIR`` puts the features of this input, under ``DIR``."""
         return ""
 
+    @abstractmethod
     def keyframe_bursts(
         self, method: dict[str, Any] | None = None, stored: Stored | None = None, out: Path | None = None
     ) -> Iterator[KeyframeBurst]:
         """The bursts, each keyed for ``method`` (:func:`lburst.store.method_key`; ``None``: no key).
         ``stored`` says which features are stored already (a source may then skip reading);
         ``out``: the run's folder, where a source records what it read."""
-        raise NotImplementedError
 
+    @abstractmethod
     def finish(self, out: Path) -> Scene:
         """The scene of the bursts read, its times (``OUT/keyframes.json``) and reference
         (``OUT/reference.json``) written."""
-        raise NotImplementedError
 
     def camera_origin(self, scene: Scene, plan: CameraPlan, opts: ReconstructOptions) -> str | None:
         return None  # a report without a camera line
