@@ -5,7 +5,8 @@ tqdm, scikit-image, openvino). The rest comes with extras: ``lburst[sfm]`` (pyco
 scikit-image), ``lburst[onnx]`` (onnx, onnxruntime, onnxscript), ``lburst[openvino]``
 (nncf), ``lburst[viz]`` (matplotlib), ``lburst[tensorboard]``, ``lburst[video]`` (PyAV:
 reading and writing recordings' videos), ``lburst[raw]`` (rawpy, tifffile: DNG frames)
-and ``lburst[evo]`` (evo, to compare trajectories; lburst's own ATE needs none). A module
+``lburst[evo]`` (evo, to compare trajectories; lburst's own ATE needs none) and
+``lburst[cluster]`` (Dask's ``distributed``: extraction and matching on a cluster). A module
 that needs one calls :func:`require`, or holds a :class:`LazyModule`, so that importing it
 costs nothing and a missing package gives a one-line message naming the extra.
 """
@@ -32,6 +33,8 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "rawpy": ("rawpy", "raw"),
     "tifffile": ("tifffile", "raw"),
     "evo": ("evo", "evo"),
+    "distributed": ("dask[distributed]", "cluster"),
+    "dask": ("dask[distributed]", "cluster"),
 }
 
 

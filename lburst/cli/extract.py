@@ -14,6 +14,9 @@ named after those images (``<name>.png``, ``<recording>/<keyframe>.png``), so th
 an image from ``OUT/images`` and its keypoints from ``features.h5`` by one name.  Features are
 keyed as ``lburst reconstruct`` keys them (:func:`lburst.store.key`).  Every file is
 written atomically, and a burst that fails is reported and skipped: the exit code is 1 if any failed.
+With ``--cluster`` the bursts to compute are tasks on a Dask cluster (:mod:`lburst.cluster`),
+through the same loop (:func:`lburst.sfm.feature_stage.keyframe_features`), so they write the
+same files, equal to a run in one process at the same ``--threads``.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import argparse
 import json
 import os
 import sys
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from tqdm import tqdm
@@ -35,11 +39,13 @@ from lburst.burst.io import (
     write_features_h5,
 )
 from lburst.cli.numbers import integer
-from lburst.cli.options import add_recording_arguments, recording_options
+from lburst.cli.options import add_cluster_argument, add_recording_arguments, recording_options
+from lburst.cluster.runner import Runner, open_runner
+from lburst.cluster.spec import parse_cluster
 from lburst.methods import accepts, create
 from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
 from lburst.model.runtimes import RUNTIMES
-from lburst.sfm.feature_stage import Layout, keyframe_features
+from lburst.sfm.feature_stage import KeyframeBurst, Layout, compute_for, keyframe_features
 from lburst.sfm.inputs import InputSource, burst_name, open_bursts
 from lburst.sfm.outputs import IMAGES
 
@@ -94,6 +100,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="what runs a learned network on the CPU (default: auto, the fastest this CPU has, for the light "
         "network lburst-lite; torch for the others); the bf16 and int8 runtimes move some keypoints",
     )
+    p.add_argument(
+        "--threads",
+        type=integer(1, 1024),
+        help="torch threads per burst (default: torch's own in one process, 1 per worker with --cluster); "
+        "the features of lburst-b5 equal byte for byte only at equal thread counts",
+    )
+    add_cluster_argument(p, "the bursts")
     add_recording_arguments(p)
 
 
@@ -151,35 +164,93 @@ def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
 
 
 def extract_input(
-    source: InputSource, extractor, args: argparse.Namespace, method: dict, finished: list[tuple[str, Path]]
+    bursts: Iterable[KeyframeBurst],
+    folder: str,
+    compute,
+    args: argparse.Namespace,
+    finished: list[tuple[str, Path]],
+    runner: Runner,
+    failed: Callable[[KeyframeBurst, Exception], None] | None = None,
+    names: list[str] | None = None,
 ) -> tuple[int, int]:
-    """Features of every burst of ``source`` (:func:`lburst.sfm.feature_stage.keyframe_features`),
-    one ``.npz`` each in ``OUT/<folder>/`` with its common frame in ``OUT/images/<folder>/``
-    (``folder``: :attr:`lburst.sfm.inputs.InputSource.folder`, a recording's name, else none);
-    returns (computed, already done) and appends each finished burst to ``finished`` as
-    (features.h5 group, ``.npz``), so that those done before a failure are kept.  A source
-    with a folder (a recording) lists the names it finished in ``OUT/<folder>/cut.json``
-    (:func:`write_cut`), even when it fails."""
-    layout = Layout(args.out / source.folder, args.out / IMAGES / source.folder)
+    """Features of ``bursts`` (:func:`lburst.sfm.feature_stage.keyframe_features`), one ``.npz``
+    each in ``OUT/<folder>/`` with its common frame in ``OUT/images/<folder>/`` (``folder``:
+    :attr:`lburst.sfm.inputs.InputSource.folder`, a recording's name, else none), computed in
+    this process or as tasks of ``runner`` on a cluster; returns (computed, already done) and
+    appends each finished burst to ``finished`` as (features.h5 group, ``.npz``) and its name
+    to ``names`` (sorted at the end, even on failure), so that those done before a failure are
+    kept.  ``failed``: a burst that fails is reported there and the others go on (by default
+    its error ends the call)."""
+    layout = Layout(args.out / folder, args.out / IMAGES / folder)
     done = skipped = 0
-    names: list[str] = []
-    bursts = source.keyframe_bursts(method)
+    names = [] if names is None else names
     try:
-        for burst in keyframe_features(bursts, extractor, layout, reuse=not args.overwrite, protect=True):
+        for burst in keyframe_features(
+            bursts,
+            compute,
+            layout,
+            reuse=not args.overwrite,
+            protect=True,
+            runner=runner,
+            failed=failed,
+            progress=True,
+            desc=f"extract {folder or 'bursts'}",
+        ):
             done, skipped = done + burst.computed, skipped + (not burst.computed)
             group = layout.image_path(burst.burst.name).relative_to(args.out / IMAGES).as_posix()
             finished.append((group, layout.features_path(burst.burst.name)))
             names.append(burst.burst.name)
     finally:
-        if source.folder:
-            write_cut(layout.features, source.path, recording_options(args), names)
+        names.sort()  # on a cluster they finish in any order; keyframe names sort in frame order
     return done, skipped
+
+
+def extract_recording(
+    source: InputSource, compute, args: argparse.Namespace, method: dict, finished: list[tuple[str, Path]], runner
+) -> tuple[int, int]:
+    """Features of every keyframe burst of a recording (:func:`extract_input`); returns (computed,
+    already done).  The names it finished go to ``OUT/<folder>/cut.json`` (:func:`write_cut`),
+    even when it fails."""
+    names: list[str] = []
+    try:
+        return extract_input(
+            source.keyframe_bursts(method), source.folder, compute, args, finished, runner, None, names
+        )
+    finally:
+        write_cut(args.out / source.folder, source.path, recording_options(args), names)
+
+
+def skip(path: Path, why: str, failed: list[tuple[Path, str]]) -> None:
+    """Report a burst that failed on stderr and keep it for the summary."""
+    failed.append((path, why))
+    tqdm.write(f"skipped {why if why.startswith(str(path)) else f'{path}: {why}'}", file=sys.stderr)
+
+
+def extract_bursts(
+    pending: list[tuple[Path, KeyframeBurst]],
+    compute,
+    args: argparse.Namespace,
+    finished: list[tuple[str, Path]],
+    runner: Runner,
+    failed: list[tuple[Path, str]],
+) -> int:
+    """Features of single bursts, one ``OUT/<name>.npz`` each, in one map (on a cluster, in
+    parallel); a burst that fails is skipped and reported.  Returns how many were computed."""
+    paths = {burst.name: path for path, burst in pending}
+
+    def report(burst: KeyframeBurst, exc: Exception) -> None:
+        skip(paths[burst.name], str(exc), failed)
+
+    new, _ = extract_input([b for _, b in pending], "", compute, args, finished, runner, report)
+    pending.clear()
+    return new
 
 
 def main(args: argparse.Namespace) -> int:
     spec = method_spec(args.method, args.weights, args.frame_order)
     options = {}
     try:
+        cluster = parse_cluster(args.cluster) if args.cluster is not None else None
         check_output_outside(args.out, args.bursts)
         wanted = {
             "top_k": str(args.top_k),
@@ -188,7 +259,7 @@ def main(args: argparse.Namespace) -> int:
             "runtime": args.runtime,
         }
         options = {k: v for k, v in wanted.items() if v is not None and accepts(spec, k)}  # learned methods have them
-        extractor = create(spec, **options)
+        extractor = create(spec, **options) if cluster is None else None  # on a cluster: one per worker
     except (CheckpointError, FileNotFoundError, ValueError):
         raise  # lburst.cli.main prints it as one line and exits with 2
     args.out.mkdir(parents=True, exist_ok=True)
@@ -201,27 +272,33 @@ def main(args: argparse.Namespace) -> int:
         cut = recording_options(args)
     except ValueError:
         raise  # lburst.cli.main prints it as one line and exits with 2
-    for path in tqdm(args.bursts, desc=f"extract {spec}", unit="burst"):
-        source = open_bursts(path, cut)  # a burst, or a recording cut into keyframe bursts
-        try:
-            here = Path(os.path.abspath(path))
-            if names.setdefault(burst_name(path), here) != here:
-                raise BurstError(
-                    f"{path}: same output name {burst_name(path)!r} as {names[burst_name(path)]} in this run; "
-                    "extract one of them into another --out"
-                )
-            new, old = extract_input(source, extractor, args, method, finished)
-        except (BurstError, ValueError, OSError, RuntimeError) as exc:  # a missing extra (ImportError) ends the run
-            failed.append((path, str(exc)))
-            tqdm.write(f"skipped {exc if str(exc).startswith(str(path)) else f'{path}: {exc}'}", file=sys.stderr)
-            continue
-        if source.folder:
+    with open_runner(cluster) as runner:
+        compute = compute_for(spec, runner, extractor, options, args.threads)
+        pending: list[tuple[Path, KeyframeBurst]] = []  # single bursts, mapped together
+        for path in args.bursts:
+            source = open_bursts(path, cut)  # a burst, or a recording cut into keyframe bursts
+            try:
+                here = Path(os.path.abspath(path))
+                if names.setdefault(burst_name(path), here) != here:
+                    raise BurstError(
+                        f"{path}: same output name {burst_name(path)!r} as {names[burst_name(path)]} in this run; "
+                        "extract one of them into another --out"
+                    )
+                if not source.folder:
+                    pending.extend((path, burst) for burst in source.keyframe_bursts(method))
+                    continue
+                done += extract_bursts(pending, compute, args, finished, runner, failed)
+                new, old = extract_recording(source, compute, args, method, finished, runner)
+            except (BurstError, ValueError, OSError, RuntimeError) as exc:  # a missing extra (ImportError) ends the run
+                skip(path, str(exc), failed)
+                continue
             tqdm.write(f"{path}: {new} keyframes extracted, {old} already done")
-        if source.error:
-            failed.append((path, source.error))
-            tqdm.write(f"stopped {path}: {source.error}", file=sys.stderr)
-            continue
-        done += new > 0
+            if source.error:
+                failed.append((path, source.error))
+                tqdm.write(f"stopped {path}: {source.error}", file=sys.stderr)
+                continue
+            done += new > 0
+        done += extract_bursts(pending, compute, args, finished, runner, failed)
     if args.h5:
         write_h5(args.out / "features.h5", sorted({**features_in_folder(args.out), **dict(finished)}.items()))
     print(

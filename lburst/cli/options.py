@@ -1,4 +1,4 @@
-"""Options that several commands share: ``--matcher`` and the recording options."""
+"""Options that several commands share: ``--matcher``, ``--cluster`` and the recording options."""
 
 from __future__ import annotations
 
@@ -87,4 +87,17 @@ def add_matcher_argument(parser) -> None:
         default=DEFAULT,
         help=f"how to match descriptors: {names}, with options as NAME,KEY=VALUE "
         f"(default {DEFAULT}; `lburst methods` lists them)",
+    )
+
+
+def add_cluster_argument(p, what: str) -> None:
+    """``--cluster local:N | tcp://HOST:PORT``: run ``what`` on a cluster (:mod:`lburst.cluster`); the
+    command reads it with :func:`lburst.cluster.spec.parse_cluster` before any work, so that a bad
+    one is one line (exit 2)."""
+    p.add_argument(
+        "--cluster",
+        metavar="SPEC",
+        help=f"run {what} on a Dask cluster: local:N starts N worker processes on this machine for the run, "
+        "tcp://HOST:PORT joins a running scheduler (workers must reach the input and --out); "
+        "needs lburst[cluster] (docs/large_surveys.md)",
     )

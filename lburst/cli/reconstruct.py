@@ -7,11 +7,12 @@ import argparse
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
-from lburst.cli.options import add_matcher_argument, add_recording_arguments, recording_options
+from lburst.cli.options import add_cluster_argument, add_matcher_argument, add_recording_arguments, recording_options
 from lburst.errors import RunFailed
 from lburst.sfm.metrics import markdown_table
 from lburst.sfm.options import (
     AUTO_EXHAUSTIVE_MAX,
+    GLOBAL_MAPPER_FROM,
     LOOP_FRACTION,
     RECORDING_ABS_POSE_INLIERS,
     RECORDING_NEAR,
@@ -78,7 +79,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="rerun with all pairs when sequential pairs leave images unregistered",
     )
-    parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
+    parser.add_argument(
+        "--mapper",
+        choices=("auto", "incremental", "global"),
+        default="incremental",
+        help=f"COLMAP's mapper; auto: incremental below {GLOBAL_MAPPER_FROM} images, global from there "
+        "(docs/large_surveys.md)",
+    )
     parser.add_argument(
         "--camera",
         choices=("auto", "default", "reference"),
@@ -117,6 +124,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="sequential pairs: also match each image with its N most similar images farther apart "
         f"(loop closure; default {RECORDING_RETRIEVAL} for a recording, 0 for a scene)",
     )
+    add_cluster_argument(parser, "the features and matching stages")
     add_recording_arguments(parser)
 
 
@@ -144,6 +152,7 @@ def main(args: argparse.Namespace) -> int:
             mapper_threads=args.mapper_threads,
             recording=recording_options(args),
             features=args.features,
+            cluster=args.cluster,
         ),
     )
 

@@ -84,6 +84,14 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         type=integer(2),
         help=f"number of bursts (default {default.n_bursts}; a --survey derives it from its path and refuses it)",
     )
+    p.add_argument(
+        "--spacing",
+        type=real(0, 1_000, low_open=True),
+        default=default.burst_spacing,
+        metavar="M",
+        help="distance flown between consecutive bursts, metres (the world grows with the path: a loop of 1000 "
+        "bursts 8 m apart needs over 20 GB, the same bursts 2.4 m apart fly the 300-burst loop)",
+    )
     p.add_argument("--frames", type=integer(1, 99), default=default.frames_per_burst, help="frames per burst (odd)")
     p.add_argument("--size", default=f"{default.width}x{default.height}", help="WIDTHxHEIGHT")
     p.add_argument(
@@ -120,6 +128,7 @@ def flight_config(args: argparse.Namespace, width: int, height: int) -> NightFli
         seed=args.seed,
         turn_deg=380.0 if args.loop else args.turn,
         pitch_deg=args.pitch,
+        burst_spacing=args.spacing,
     )
     if args.bursts is not None:
         kwargs.update(n_bursts=args.bursts)

@@ -8,7 +8,9 @@ Each burst's features go to ``<features>/<name>.npz`` under the key its source g
 image they describe, are used as they are; features stored under the same key elsewhere
 (``lburst reconstruct`` finds those of ``lburst extract``: :attr:`Layout.elsewhere`) are
 copied, not computed again.  The loop never asks what kind of input it reads: it takes
-bursts one at a time, so a cluster map can take its place.
+bursts one at a time, and each burst to compute is one task (:class:`BurstJob`) of a runner
+(:mod:`lburst.cluster.runner`) that does it in this process or on a Dask cluster worker,
+which writes the same files (``--cluster``: docs/large_surveys.md).
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ import numpy as np
 
 from lburst import methods, store
 from lburst.burst.io import BurstError, file_sha1
+from lburst.cluster.models import WorkerExtractor, extractor_request, set_threads
+from lburst.cluster.runner import Runner
 from lburst.features import Features, check_features
 from lburst.sfm.outputs import write_common_frame
 from lburst.sfm.result import ReconstructionError
@@ -97,6 +101,37 @@ def check_target(path: Path, key: dict[str, Any]) -> None:
         )
 
 
+@dataclass(frozen=True)
+class BurstJob:
+    """One burst whose features are computed (or copied from ``layout.elsewhere``) and stored:
+    a task that :func:`compute_burst` does in this process or on a cluster worker, so that its
+    parts travel (a burst that a worker can read is loaded there; a recording's keyframe,
+    already cut, travels with it)."""
+
+    burst: KeyframeBurst
+    compute: Callable[[np.ndarray], Features]
+    layout: Layout
+    reuse: bool = True
+
+
+def compute_burst(job: BurstJob) -> bool:
+    """Read the burst, write its common frame, take its features stored under its key elsewhere
+    (with ``reuse``) or compute them, and store them beside the frame's SHA-1; returns whether
+    they were computed."""
+    burst, layout = job.burst, job.layout
+    target, image = layout.features_path(burst.name), layout.image_path(burst.name)
+    frames = burst.load()
+    write_common_frame(image, frames)
+    found = store.find(layout.stored_paths(burst.name), burst.key) if job.reuse else None
+    features = job.compute(frames) if found is None else found[0]
+    store.save(target, features, (frames.shape[2], frames.shape[1]), burst.key, image_sha1=file_sha1(image))
+    return found is None
+
+
+#: what a failed burst raises that ``keyframe_features(failed=...)`` reports and skips
+BURST_ERRORS = (BurstError, ValueError, OSError, RuntimeError)
+
+
 def keyframe_features(
     bursts: Iterable[KeyframeBurst],
     compute: Callable[[np.ndarray], Features],
@@ -104,23 +139,65 @@ def keyframe_features(
     *,
     reuse: bool = True,
     protect: bool = False,
+    runner: Runner | None = None,
+    failed: Callable[[KeyframeBurst, Exception], None] | None = None,
+    progress: bool = False,
+    desc: str = "features",
 ) -> Iterator[Extracted]:
-    """The features of each burst, in order, as they are done (module docstring).  ``reuse``:
-    take stored features (``False``: compute every burst again); ``protect``: refuse to
-    replace a file of someone else's or of another burst (:func:`check_target`)."""
-    for burst in bursts:
-        target, image = layout.features_path(burst.name), layout.image_path(burst.name)
-        if reuse and (features := stored(layout, burst.name, burst.key)) is not None:
-            yield Extracted(burst, features, computed=False)
+    """The features of each burst as they are done (module docstring): in order in one process,
+    in the order their tasks finish on a cluster (``runner``: :mod:`lburst.cluster.runner`,
+    by default this process).  ``reuse``: take stored features (``False``: compute every
+    burst again); ``protect``: refuse to replace a file of someone else's or of another burst
+    (:func:`check_target`).  ``failed(burst, error)``: a burst that fails is reported there and
+    skipped (by default its error ends the loop).  ``progress``: a bar over computed bursts."""
+    runner = runner or Runner()
+    ready: list[Extracted] = []  # stored ones, given out before the next computed one
+
+    def jobs() -> Iterator[BurstJob]:
+        for burst in bursts:
+            if reuse and (features := stored(layout, burst.name, burst.key)) is not None:
+                ready.append(Extracted(burst, features, computed=False))
+                continue
+            if protect and reuse:
+                try:
+                    check_target(layout.features_path(burst.name), burst.key)
+                except BurstError as exc:
+                    if failed is None:
+                        raise
+                    failed(burst, exc)
+                    continue
+            yield BurstJob(burst, compute, layout, reuse)
+
+    for job, result in runner.map(compute_burst, jobs(), desc, progress):
+        yield from ready
+        ready.clear()
+        try:
+            computed = result()
+        except BURST_ERRORS as exc:
+            if failed is None:
+                raise
+            failed(job.burst, exc)
             continue
-        if protect and reuse:
-            check_target(target, burst.key)
-        frames = burst.load()
-        write_common_frame(image, frames)
-        found = store.find(layout.stored_paths(burst.name), burst.key) if reuse else None
-        features = compute(frames) if found is None else found[0]
-        store.save(target, features, (frames.shape[2], frames.shape[1]), burst.key, image_sha1=file_sha1(image))
-        yield Extracted(burst, store.load(target, burst.key)[0], computed=found is None)  # as stored
+        target = layout.features_path(job.burst.name)
+        yield Extracted(job.burst, store.load(target, job.burst.key)[0], computed)  # as stored
+    yield from ready
+
+
+def compute_for(
+    spec: str,
+    runner: Runner,
+    extractor: Callable | None = None,
+    options: dict[str, Any] | None = None,
+    threads: int | None = None,
+) -> Callable[[np.ndarray], Features]:
+    """The per-burst ``compute`` of ``spec`` (created with ``options``) for ``runner``: in this
+    process ``extractor`` or one created on first use (:class:`LazyExtractor`), with torch at
+    ``threads``; on a cluster each worker's own (:class:`lburst.cluster.models.WorkerExtractor`),
+    at ``threads`` or the runner's count (one)."""
+    if runner.remote:
+        return WorkerExtractor(extractor_request(spec, options, threads or runner.threads))
+    set_threads(threads)
+    return LazyExtractor(spec, extractor, options)
 
 
 def safe_name(name: str) -> str:
@@ -142,10 +219,10 @@ class LazyExtractor:
     """``extractor(burst)``, checked (:func:`lburst.features.check_features`), the method created
     from ``spec`` on first use only, so a run whose features are all stored never loads a network."""
 
-    def __init__(self, spec: str, extractor=None) -> None:
-        self.spec, self.extractor = spec, extractor
+    def __init__(self, spec: str, extractor=None, options: dict[str, Any] | None = None) -> None:
+        self.spec, self.extractor, self.options = spec, extractor, dict(options or {})
 
     def __call__(self, burst) -> Features:
-        if self.extractor is None:
-            self.extractor = methods.create(self.spec)  # torch, for a learned method: only when a burst needs it
+        if self.extractor is None:  # torch, for a learned method: only when a burst needs it
+            self.extractor = methods.create(self.spec, **self.options)
         return check_features(self.extractor(burst))

@@ -30,10 +30,11 @@ from typing import Any
 from lburst import store
 from lburst.burst.io import BurstError, load_burst
 from lburst.burst.sources import Keyframe, Recording, RecordingOptions, is_recording, open_recording
+from lburst.cluster.runner import Runner
 from lburst.features import Features
 from lburst.sfm import recording as rec
 from lburst.sfm.cameras import CameraPlan, camera_origin
-from lburst.sfm.feature_stage import KeyframeBurst, Layout, LazyExtractor, keyframe_features, safe_name, stored
+from lburst.sfm.feature_stage import KeyframeBurst, Layout, compute_for, keyframe_features, safe_name, stored
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import IMAGES, copy_reference, write_scene_times
 from lburst.sfm.result import ReconstructionError
@@ -97,23 +98,31 @@ class InputSource(ABC):
     def camera_origin(self, scene: Scene, plan: CameraPlan, opts: ReconstructOptions) -> str | None:
         return None  # a report without a camera line
 
-    def read(self, spec: str, out: Path, opts: ReconstructOptions, extractor=None) -> Keyframes:
+    def read(
+        self, spec: str, out: Path, opts: ReconstructOptions, extractor=None, runner: Runner | None = None
+    ) -> Keyframes:
         """The features stage of a reconstruction into ``out``: the features of every burst
         (:func:`lburst.sfm.feature_stage.keyframe_features`), in ``OUT/features`` and
         ``OUT/images``, taken from ``opts.features`` (``lburst extract``'s folder, by default
-        ``out``) where they are stored; then the scene (:meth:`finish`)."""
+        ``out``) where they are stored, computed in this process or by ``runner`` on a cluster;
+        then the scene (:meth:`finish`), its items' features in its order."""
         extracted = out if opts.features is None else Path(opts.features)
         layout = Layout(out / "features", out / IMAGES, (extracted / self.folder,))
         method = store.method_key(spec)
+        runner = runner or Runner()
         bursts = self.keyframe_bursts(method, lambda name, key: stored(layout, name, key) is not None, out)
         named = (burst for burst in bursts if safe_name(burst.name))  # names COLMAP can store
-        done = []
+        compute = compute_for(spec, runner, extractor)
+        done: dict[str, Features] = {}
         try:
-            for extracted_burst in keyframe_features(named, LazyExtractor(spec, extractor), layout):
-                done.append(extracted_burst.features)
+            for extracted_burst in keyframe_features(
+                named, compute, layout, runner=runner, progress=opts.progress, desc=f"features {spec}"
+            ):
+                done[extracted_burst.burst.name] = extracted_burst.features
         except BurstError as err:  # the input itself cannot be read
             raise ReconstructionError(str(err)) from err
-        return Keyframes(self.finish(out), done, self.error)
+        scene = self.finish(out)
+        return Keyframes(scene, [done[item.name] for item in scene.items if item.name in done], self.error)
 
 
 class BurstInput(InputSource):

@@ -9,6 +9,7 @@ from enum import StrEnum
 from pathlib import Path
 
 from lburst.burst.sources import RecordingOptions
+from lburst.cluster.spec import ClusterSpec, parse_cluster
 from lburst.errors import LBurstValueError
 
 AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto' for a scene: exhaustive up to this many images, else sequential
@@ -22,6 +23,9 @@ RECORDING_NEAR = 2
 RECORDING_RETRIEVAL = 5
 LOOP_FRACTION = 0.4
 RECORDING_ABS_POSE_INLIERS = 10
+# mapper='auto': the global mapper from this many images on; at 100 it was not faster and 19x less
+# accurate than the incremental one (docs/large_surveys.md), and the 1000-keyframe row decides the rest
+GLOBAL_MAPPER_FROM = 1000
 
 
 class Pairs(StrEnum):
@@ -41,6 +45,9 @@ class Camera(StrEnum):
 
 
 class Mapper(StrEnum):
+    """COLMAP's mapper (:func:`lburst.sfm.pairs.pair_plan` resolves ``auto`` by the image count)."""
+
+    AUTO = "auto"  # incremental below GLOBAL_MAPPER_FROM images, global from there (docs/large_surveys.md)
     INCREMENTAL = "incremental"
     GLOBAL = "global"
 
@@ -65,7 +72,8 @@ class ReconstructOptions:
         fallback_exhaustive: rerun with every pair when sequential pairs leave images out.
         camera (:class:`Camera`), camera_model, single_camera, fix_intrinsics: cameras
             (:mod:`lburst.sfm.cameras`).
-        mapper: :class:`Mapper`, ``'incremental'`` or ``'global'``.
+        mapper: :class:`Mapper`, ``'incremental'``, ``'global'`` or ``'auto'`` (incremental
+            below ``GLOBAL_MAPPER_FROM`` images, global from there: docs/large_surveys.md).
         num_threads, seed: for COLMAP (repeatable for one thread count).
         progress: tqdm bars, and a line on stderr per stage of matching and COLMAP with its seconds.
         extra: further :class:`lburst.sfm.colmap.ColmapOptions` fields, e.g. ``max_num_trials``.
@@ -89,6 +97,9 @@ class ReconstructOptions:
         features: a folder that ``lburst extract --out`` wrote: a burst's features stored
             there under the same key (:func:`lburst.store.key`: same method and burst) are
             used, not computed again; ``None``: the output folder.
+        cluster: run the features and matching stages on this cluster (:mod:`lburst.cluster`):
+            a :class:`lburst.cluster.spec.ClusterSpec` or its text (``'local:4'``,
+            ``'tcp://HOST:PORT'``); ``None``: in this process.
     """
 
     pairs: Pairs = Pairs.AUTO
@@ -111,8 +122,11 @@ class ReconstructOptions:
     recording: RecordingOptions | None = None
     matcher: str = "mnn"
     features: str | Path | None = None
+    cluster: ClusterSpec | str | None = None
 
     def __post_init__(self) -> None:
         self.pairs = _enum(Pairs, self.pairs, "pairing")
         self.camera = _enum(Camera, self.camera, "camera option")
         self.mapper = _enum(Mapper, self.mapper, "mapper")
+        if isinstance(self.cluster, str):
+            self.cluster = parse_cluster(self.cluster)

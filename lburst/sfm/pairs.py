@@ -12,11 +12,13 @@ from dataclasses import dataclass
 from lburst.errors import LBurstValueError
 from lburst.sfm.options import (
     AUTO_EXHAUSTIVE_MAX,
+    GLOBAL_MAPPER_FROM,
     RECORDING_ABS_POSE_INLIERS,
     RECORDING_NEAR,
     RECORDING_OVERLAP,
     RECORDING_RETRIEVAL,
     SCENE_OVERLAP,
+    Mapper,
     Pairs,
     ReconstructOptions,
 )
@@ -54,6 +56,7 @@ class PairPlan:
     abs_pose_inliers: int  # incremental mapper: fewest 2D-3D inliers to register an image
     two_view_tracks: bool = False  # incremental mapper: triangulate tracks of two images too
     mapper_threads: int | None = None  # None: num_threads
+    mapper: str = "incremental"  # 'incremental' or 'global' (opts.mapper, 'auto' resolved by the image count)
 
 
 def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
@@ -72,6 +75,8 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
     scale can drift along the chain), mapped with one thread (repeatable).  A scene keeps exhaustive pairs up to
     ``AUTO_EXHAUSTIVE_MAX`` images, sequential with overlap 10 beyond, no retrieval, no
     loop test, COLMAP's 30 and COLMAP's triangulation, unless the options say otherwise.
+    ``mapper='auto'`` is the incremental mapper below ``GLOBAL_MAPPER_FROM`` images and the
+    global one from there (docs/large_surveys.md).
     """
     if recording:
         mode = Pairs.SEQUENTIAL if opts.pairs == Pairs.AUTO else opts.pairs
@@ -89,6 +94,9 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
     default_abs = RECORDING_ABS_POSE_INLIERS if recording else 30
     abs_pose = default_abs if opts.abs_pose_inliers is None else opts.abs_pose_inliers
     mapper_threads = opts.mapper_threads if opts.mapper_threads is not None else (1 if recording else None)
+    mapper = opts.mapper
+    if mapper == Mapper.AUTO:
+        mapper = Mapper.GLOBAL if n >= GLOBAL_MAPPER_FROM else Mapper.INCREMENTAL
     return PairPlan(
         str(mode),
         overlap,
@@ -97,4 +105,5 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
         abs_pose,
         recording,
         mapper_threads,
+        str(mapper),
     )

@@ -17,7 +17,8 @@ written to ``OUT/colmap/model`` (binary) and ``OUT/colmap/model.ply``, and
 the metrics (:mod:`lburst.sfm.metrics`), the registered images and their poses.  Every
 input then leaves the same files for other tools (:mod:`lburst.sfm.outputs`): hloc's
 ``features.h5``, ``matches.h5`` and ``pairs.txt``, ``trajectory.tum`` (and
-``reference.tum``), ``report.md``.
+``reference.tum``), ``report.md``.  With ``options.cluster`` the features and matching
+stages run on a Dask cluster (:mod:`lburst.cluster`), started or joined for the run.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from lburst.burst.io import atomic_path, check_output_outside
+from lburst.cluster.runner import Runner, open_runner
 from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
 from lburst.sfm.feature_stage import utf8
@@ -66,6 +68,13 @@ def reconstruct_scene(
     is returned as a result with ``status`` :attr:`Status.COLMAP_FAILED` and ``error`` set.
     """
     opts = options or ReconstructOptions()
+    with open_runner(opts.cluster) as runner:
+        return _reconstruct(scene_dir, method_spec, out_dir, opts, extractor, runner)
+
+
+def _reconstruct(
+    scene_dir: str | Path, method_spec: str, out_dir: str | Path, opts: ReconstructOptions, extractor, runner: Runner
+) -> ReconstructionResult:
     source = open_input(scene_dir, opts.recording)  # the one question about the kind of input
     if opts.single_camera is None:  # one camera shot a recording; a scene's photos may come from several
         opts = replace(opts, single_camera=source.one_camera)
@@ -77,7 +86,7 @@ def reconstruct_scene(
     if not utf8(str(out.resolve())):
         raise ReconstructionError(f"{out!s}: the output path is not valid UTF-8, which COLMAP cannot use")
     try:
-        scene, features, source_error = source.read(method_spec, out, opts, extractor).unpack()
+        scene, features, source_error = source.read(method_spec, out, opts, extractor, runner).unpack()
         if source_error and len(scene.items) < 2:  # nothing to reconstruct: say why in result.json too
             out.mkdir(parents=True, exist_ok=True)
             read = f"{len(scene.items)} keyframe(s) read before the recording stopped; no model"
@@ -109,9 +118,9 @@ def reconstruct_scene(
         )
         loop_candidates = set(loops) - set(pairs)
         pairs = sorted(set(pairs) | loop_candidates)
-    matches, scores = match_pairs_with_scores(features, pairs, opts.progress, opts.matcher)
+    matches, scores = match_pairs_with_scores(features, pairs, opts.progress, opts.matcher, runner)
     colmap_options = ColmapOptions(
-        mapper=str(opts.mapper),
+        mapper=plan.mapper,
         num_threads=opts.num_threads,
         seed=opts.seed,
         refine_focal_length=not cams.fixed,
@@ -149,7 +158,7 @@ def reconstruct_scene(
         if attempt or done or not opts.fallback_exhaustive or mode == "exhaustive":
             break
         extra = [p for p in exhaustive_pairs(n) if p not in set(pairs)]
-        extra_matches, extra_scores = match_pairs_with_scores(features, extra, opts.progress, opts.matcher)
+        extra_matches, extra_scores = match_pairs_with_scores(features, extra, opts.progress, opts.matcher, runner)
         pairs, matches, scores = pairs + extra, matches + extra_matches, scores + extra_scores
     verified = np.load(job_dir / "verified.npz") if (job_dir / "verified.npz").is_file() and not colmap_error else None
     inlier_counts = [len(verified[k]) for k in verified.files if k.startswith("inl_")] if verified is not None else []
@@ -166,6 +175,7 @@ def reconstruct_scene(
         overlap=plan.overlap if mode == "sequential" else None,
         loop_candidates=len(loop_candidates),
         matcher=opts.matcher,
+        mapper=plan.mapper,
     )
     if (origin := source.camera_origin(scene, cams, opts)) is not None:
         result.metrics["camera"] = origin

@@ -1,0 +1,61 @@
+"""A cluster for one run: a local one started and stopped with it, or a running one joined
+(:func:`open_cluster`).
+
+A local cluster has one worker process per ``N`` of ``local:N``, each running one task at a
+time (one burst; its torch threads are the job's, :mod:`lburst.cluster.models`), behind a
+nanny that restarts a worker process that dies; the scheduler then runs the dead worker's
+tasks again elsewhere, so a killed worker costs its task's time, not the run.
+"""
+
+from __future__ import annotations
+
+import logging
+from contextlib import contextmanager
+from typing import Any, Iterator
+
+from lburst.cluster.spec import ClusterSpec
+from lburst.errors import LBurstError
+from lburst.extras import require
+
+#: seconds to wait for a scheduler to answer (a remote cluster), or for a local cluster's workers
+CONNECT_TIMEOUT_S = 60
+
+
+class ClusterError(LBurstError, RuntimeError):
+    """The cluster failed the run: no scheduler at the address, a task that killed every
+    worker that ran it, a lost connection; what finished is in the store."""
+
+
+@contextmanager
+def open_cluster(spec: ClusterSpec) -> Iterator[Any]:
+    """A ``distributed.Client`` of the cluster of ``spec``, closed (and a local cluster
+    stopped) when the block ends."""
+    distributed = require("distributed", "--cluster")
+    cluster = None
+    try:
+        if spec.local:
+            cluster = distributed.LocalCluster(
+                n_workers=spec.workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",  # a free port: another cluster on this machine may hold 8787
+                silence_logs=logging.CRITICAL,  # failures reach the client, which reports them
+            )
+            client = distributed.Client(cluster)
+        else:
+            client = distributed.Client(spec.address, timeout=CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError) as exc:
+        if cluster is not None:
+            cluster.close()
+        raise ClusterError(f"--cluster {spec}: no cluster to run on ({exc})") from None
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def worker_count(client: Any) -> int:
+    """How many workers the cluster has now (at least 1, so that a cluster still starting gets work)."""
+    return max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
