@@ -3,7 +3,7 @@
 
 For each N: the scene is simulated once (``ROOT/scenes/loopN``); its features are computed
 once by the features stage of ``lburst reconstruct`` (``ROOT/runs/loopN/features``:
-:func:`lburst.sfm.feature_stage.scene_features`) and timed as *decode* (reading the bursts)
+:meth:`lburst.sfm.inputs.SceneInput.read`) and timed as *decode* (reading the bursts)
 and *features* (the rest: the network, alignment, writing the store and the images); then
 ``lburst reconstruct`` runs once per mapper on the stored features (``--features``), timed by
 stage: *pairs* (the pair plan, retrieval's VLAD vectors and candidates), *matches*, and

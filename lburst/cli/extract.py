@@ -277,6 +277,8 @@ def main(args: argparse.Namespace) -> int:
         pending: list[tuple[Path, KeyframeBurst]] = []  # single bursts, mapped together
         for path in args.bursts:
             source = open_bursts(path, cut)  # a burst, or a recording cut into keyframe bursts
+            if source.folder:  # the single bursts before it first
+                done += extract_bursts(pending, compute, args, finished, runner, failed)
             try:
                 here = Path(os.path.abspath(path))
                 if names.setdefault(burst_name(path), here) != here:
@@ -287,7 +289,6 @@ def main(args: argparse.Namespace) -> int:
                 if not source.folder:
                     pending.extend((path, burst) for burst in source.keyframe_bursts(method))
                     continue
-                done += extract_bursts(pending, compute, args, finished, runner, failed)
                 new, old = extract_recording(source, compute, args, method, finished, runner)
             except (BurstError, ValueError, OSError, RuntimeError) as exc:  # a missing extra (ImportError) ends the run
                 skip(path, str(exc), failed)
