@@ -153,6 +153,19 @@ def test_a_rerun_on_the_cluster_computes_only_what_is_missing(flight, one_proces
     assert stored_arrays(out) == {k: v for k, v in stored_arrays(one_process).items() if "/" not in k}
 
 
+def test_a_burst_that_fails_on_the_cluster_is_reported_and_the_others_finish(
+    flight, one_process, cluster, tmp_path, capsys
+):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    out = tmp_path / "out"
+    address = cluster.scheduler.address
+    assert lburst_main(["extract", str(empty), *bursts(flight), "--out", str(out), "--cluster", address]) == 1
+    captured = capsys.readouterr()
+    assert f"  failed: {empty}" in captured.err and "4 bursts extracted" in captured.out
+    assert stored_arrays(out) == {k: v for k, v in stored_arrays(one_process).items() if "/" not in k}
+
+
 @pytest.mark.parametrize(
     "spec", ["local:0", "local:x", "local", "local:2:3", "tcp://host", "http://host:8786", "tcp://host:70000", ""]
 )

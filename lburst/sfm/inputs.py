@@ -115,9 +115,7 @@ class InputSource(ABC):
         compute = compute_for(spec, runner, extractor)
         done: dict[str, Features] = {}
         try:
-            for extracted_burst in keyframe_features(
-                named, compute, layout, runner=runner, progress=opts.progress, desc=f"features {spec}"
-            ):
+            for extracted_burst in keyframe_features(named, compute, layout, runner=runner):
                 done[extracted_burst.burst.name] = extracted_burst.features
         except BurstError as err:  # the input itself cannot be read
             raise ReconstructionError(str(err)) from err
