@@ -26,6 +26,8 @@ def test_large_inputs_get_sequential_pairs_and_auto_the_global_mapper(recording)
         assert plan.mapper == ("global" if n >= GLOBAL_MAPPER_FROM else "incremental")
     assert pair_plan(5000, ReconstructOptions(), recording).mapper == "incremental"  # the default stays
     assert pair_plan(1000, ReconstructOptions(mapper="global"), recording).mapper == "global"
+    # position priors go to the incremental mapper only: auto picks it at any size
+    assert pair_plan(5000, ReconstructOptions(mapper="auto", positions="p.txt"), recording).mapper == "incremental"
 
 
 def test_a_long_loop_can_fly_its_bursts_closer_together():
@@ -79,6 +81,15 @@ def cluster():
     """A local cluster of 2 worker processes that runs join by its address."""
     with open_cluster(ClusterSpec(workers=2)) as client:
         yield client
+
+
+def test_local_workers_run_without_dasks_malloc_trim_threshold(cluster):
+    """Dask's MALLOC_TRIM_THRESHOLD_ fixes glibc's mmap threshold, which cost 1 s a burst in
+    page faults (docs/large_surveys.md); the workers lburst starts run without it."""
+    import os
+
+    seen = cluster.run(lambda: (os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("OMP_NUM_THREADS")))
+    assert len(seen) == 2 and all(value == (None, "1") for value in seen.values())
 
 
 def stored_arrays(out: Path) -> dict[str, dict[str, bytes]]:

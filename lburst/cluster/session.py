@@ -20,6 +20,13 @@ from lburst.extras import require
 #: seconds to wait for a scheduler to answer (a remote cluster), or for a local cluster's workers
 CONNECT_TIMEOUT_S = 60
 
+#: Dask's environment for the worker processes it spawns, less ``MALLOC_TRIM_THRESHOLD_``:
+#: Dask sets it (65536) to hand freed memory back to the system, which also fixes glibc's
+#: mmap threshold, so that every large array of a burst is mapped afresh and its pages
+#: faulted in again (on 20 bursts of 5x640x480: 27 s of system time against 4 s in one
+#: process, docs/large_surveys.md).  A worker keeps one burst at a time, so its memory stays flat.
+WORKER_ENVIRON = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+
 
 class ClusterError(LBurstError, RuntimeError):
     """The cluster failed the run: no scheduler at the address, a task that killed every
@@ -31,16 +38,18 @@ def open_cluster(spec: ClusterSpec) -> Iterator[Any]:
     """A ``distributed.Client`` of the cluster of ``spec``, closed (and a local cluster
     stopped) when the block ends."""
     distributed = require("distributed", "--cluster")
+    dask = require("dask", "--cluster")
     cluster = None
     try:
         if spec.local:
-            cluster = distributed.LocalCluster(
-                n_workers=spec.workers,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=":0",  # a free port: another cluster on this machine may hold 8787
-                silence_logs=logging.CRITICAL,  # failures reach the client, which reports them
-            )
+            with dask.config.set(WORKER_ENVIRON):
+                cluster = distributed.LocalCluster(
+                    n_workers=spec.workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=":0",  # a free port: another cluster on this machine may hold 8787
+                    silence_logs=logging.CRITICAL,  # failures reach the client, which reports them
+                )
             client = distributed.Client(cluster)
         else:
             client = distributed.Client(spec.address, timeout=CONNECT_TIMEOUT_S)
