@@ -18,6 +18,7 @@ timing) and every finished (N, mapper) row, and computes only what is missing.
 
     python scripts/survey_scaling.py --root outputs/survey_scaling --sizes 100 300 --threads 1
     python scripts/survey_scaling.py --root outputs/survey_scaling --sizes 1000 --threads 1   # hours
+    python scripts/survey_scaling.py --sizes 300 --mappers incremental+gnss   # with GNSS priors
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ import time
 from pathlib import Path
 
 MAPPERS = ("incremental", "global")
+#: the incremental mapper with the scene's GNSS positions as priors (``lburst reconstruct --positions``)
+WITH_GNSS = "incremental+gnss"
 
 
 def reset_peak() -> None:
@@ -114,8 +117,10 @@ def child_reconstruct(args: argparse.Namespace) -> dict:
     lines: list[str] = []
     run_job = rec.run_job_subprocess
     rec.run_job_subprocess = colmap.wrap(lambda job_dir, report=None: run_job(job_dir, report=lines.append))
+    gnss = args.mapper == WITH_GNSS
     options = ReconstructOptions(
-        mapper=args.mapper,
+        mapper="incremental" if gnss else args.mapper,
+        positions=positions_file(args, args.n) if gnss else None,
         num_threads=args.threads,
         progress=False,
         retrieval=args.retrieval,
@@ -166,6 +171,7 @@ def run_child(args: argparse.Namespace, *extra: str) -> dict:
     cmd += ["--retrieval", str(args.retrieval)] if args.retrieval is not None else []
     cmd += ["--near", str(args.near)] if args.near is not None else []
     cmd += ["--loop-length", str(args.loop_length), "--dense-from", str(args.dense_from)] if args.loop_length else []
+    cmd += ["--gnss-noise", str(args.gnss_noise)]
     done = subprocess.run([*cmd, *extra], capture_output=True, text=True)
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(extra)} failed:\n{done.stderr[-3000:]}")
@@ -181,6 +187,19 @@ def simulate(args: argparse.Namespace, n: int) -> dict | None:
     cmd += ["--spacing", str(spacing(args, n))] if spacing(args, n) is not None else []
     subprocess.run(cmd, check=True, capture_output=True)
     return {"s": round(time.perf_counter() - start, 1)}
+
+
+def positions_file(args: argparse.Namespace, n: int) -> Path:
+    """Scene N's ``positions.txt`` (what ``lburst simulate flight`` writes: the true centres plus
+    ``--gnss-noise`` m of seeded noise), written from its config if the scene predates it."""
+    from lburst.scenes.night_flight import NightFlightConfig, gnss_positions
+    from lburst.sfm.positions import POSITIONS_FILE, write_positions
+
+    path = scene_dir(args, n) / POSITIONS_FILE
+    if not path.is_file():
+        cfg = NightFlightConfig.from_dict(json.loads((scene_dir(args, n) / "night_flight.json").read_text()))
+        write_positions(path, gnss_positions(cfg, args.gnss_noise))
+    return path
 
 
 def save(args: argparse.Namespace, data: dict) -> None:
@@ -232,7 +251,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--root", type=Path, default=Path("outputs/survey_scaling"))
     parser.add_argument("--sizes", type=int, nargs="+", default=[100, 300, 1000])
-    parser.add_argument("--mappers", nargs="+", choices=MAPPERS, default=list(MAPPERS))
+    parser.add_argument(
+        "--mappers",
+        nargs="+",
+        choices=[*MAPPERS, WITH_GNSS],
+        default=list(MAPPERS),
+        help=f"{WITH_GNSS}: the incremental mapper with the scene's positions.txt as priors",
+    )
+    parser.add_argument("--gnss-noise", type=float, default=2.0, help="metres of noise of a scene's positions.txt")
     parser.add_argument("--size", default="320x240", help="image size of the simulated flight")
     parser.add_argument("--method", default="lburst")
     parser.add_argument("--threads", type=int, default=1, help="torch and COLMAP threads")

@@ -21,6 +21,7 @@ from lburst.sfm.options import (
     SCENE_OVERLAP,
     ReconstructOptions,
 )
+from lburst.sfm.positions import DEFAULT_STD_M
 from lburst.sfm.reconstruct import reconstruct_scene
 from lburst.sfm.result import Status
 
@@ -124,6 +125,21 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="sequential pairs: also match each image with its N most similar images farther apart "
         f"(loop closure; default {RECORDING_RETRIEVAL} for a recording, 0 for a scene)",
     )
+    parser.add_argument(
+        "--positions",
+        type=Path,
+        metavar="FILE",
+        help="position priors (GNSS, a flight log): lines 'NAME X Y Z', camera centres in metres in a local "
+        "Cartesian frame; the incremental mapper holds each camera near its prior and the model comes out in "
+        "that frame (lburst simulate flight writes SCENE/positions.txt)",
+    )
+    parser.add_argument(
+        "--position-std",
+        type=real(0, 1e6, low_open=True),
+        default=DEFAULT_STD_M,
+        metavar="M",
+        help=f"standard deviation of each coordinate of a position prior, metres (default {DEFAULT_STD_M})",
+    )
     add_cluster_argument(parser, "the features and matching stages")
     add_recording_arguments(parser)
 
@@ -153,6 +169,8 @@ def main(args: argparse.Namespace) -> int:
             recording=recording_options(args),
             features=args.features,
             cluster=args.cluster,
+            positions=args.positions,
+            position_std=args.position_std,
         ),
     )
 

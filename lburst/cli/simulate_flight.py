@@ -11,7 +11,8 @@ from pathlib import Path
 from lburst.cli.numbers import integer, real
 from lburst.errors import LBurstValueError
 from lburst.scenes import flight_recording as recording
-from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
+from lburst.scenes.night_flight import NightFlightConfig, gnss_positions, make_night_flight
+from lburst.sfm.positions import DEFAULT_STD_M, POSITIONS_FILE, write_positions
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -103,6 +104,14 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--daylight", action="store_true", help="no night lighting")
     p.add_argument("--supersample", type=integer(1, 16), default=default.supersample, help="anti-aliasing factor")
     p.add_argument("--seed", type=integer(0), default=default.seed)
+    p.add_argument(
+        "--gnss-noise",
+        type=real(0),
+        default=DEFAULT_STD_M,
+        metavar="M",
+        help="OUT/positions.txt: the true camera centres plus Gaussian noise of this many metres on each "
+        f"coordinate, a GNSS receiver's log for lburst reconstruct --positions (default {DEFAULT_STD_M})",
+    )
 
 
 def survey_conflict(args: argparse.Namespace) -> str | None:
@@ -154,6 +163,7 @@ def main(args: argparse.Namespace) -> int:
     cfg = flight_config(args, width, height)
     if args.out is not None:
         ref = make_night_flight(args.out, cfg)
+        write_positions(args.out / POSITIONS_FILE, gnss_positions(cfg, args.gnss_noise))
         path = f"a survey of {cfg.survey_lines} lines, " if cfg.survey_lines else ""
         print(
             f"{args.out}: {path}{cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, trajectory {ref.length:.1f} m"

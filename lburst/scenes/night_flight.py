@@ -267,6 +267,13 @@ def reference(cfg: NightFlightConfig) -> Reference:
     return Reference(source="synthetic", camera=camera, poses=poses, length=length)
 
 
+def gnss_positions(cfg: NightFlightConfig, std: float) -> dict[str, np.ndarray]:
+    """What a GNSS receiver would log for the common frames: each true camera centre plus
+    Gaussian noise of ``std`` metres on each coordinate, seeded by the config's seed."""
+    rng = np.random.default_rng([cfg.seed, 2])
+    return {name: -R.T @ t + rng.normal(0.0, std, 3) for name, (R, t) in reference(cfg).poses.items()}
+
+
 def ground_bounds(cfg: NightFlightConfig, margin: float = 10.0) -> np.ndarray:
     """(2, 2) ``[[x0, y0], [x1, y1]]`` covering the ground seen by every frame."""
     K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)

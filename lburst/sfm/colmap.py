@@ -196,7 +196,9 @@ class ColmapJob:
 
     ``cameras`` are COLMAP camera dicts ``{model, width, height, params, prior_focal}``;
     image ``i`` (named ``names[i]``, stored as ``names[i] + '.png'`` in ``image_dir``)
-    uses camera ``camera_of_image[i]``.
+    uses camera ``camera_of_image[i]``.  ``positions``: each image's prior camera centre
+    ``[X, Y, Z]`` (m) or ``None`` (:mod:`lburst.sfm.positions`), held in bundle adjustment
+    with a standard deviation of ``position_std`` m per coordinate; ``None``: no priors.
     """
 
     names: list[str]
@@ -204,6 +206,8 @@ class ColmapJob:
     cameras: list[dict]
     camera_of_image: list[int]
     options: ColmapOptions = field(default_factory=ColmapOptions)
+    positions: list[list[float] | None] | None = None
+    position_std: float = 2.0
 
     def save(self, path: Path) -> None:
         with atomic_path(path) as tmp:
@@ -305,9 +309,21 @@ def write_database(
             db.write_frame(frame)
             db.write_keypoints(image.image_id, np.ascontiguousarray(kp, dtype=np.float32) + np.float32(0.5))
             image_ids.append(image.image_id)
+            if job.positions is not None and job.positions[len(image_ids) - 1] is not None:
+                db.write_pose_prior(_position_prior(image.data_id, job.positions[len(image_ids) - 1], job.position_std))
         for (a, b), m in zip(pairs, matches):
             db.write_matches(image_ids[a], image_ids[b], np.ascontiguousarray(m, dtype=np.uint32))
     return image_ids
+
+
+def _position_prior(data_id, position: list[float], std: float) -> pycolmap.PosePrior:
+    """COLMAP's prior of an image's centre (Cartesian, metres), ``std`` m on each coordinate."""
+    return pycolmap.PosePrior(
+        corr_data_id=data_id,
+        position=np.asarray(position, dtype=np.float64),
+        position_covariance=np.eye(3) * float(std) ** 2,
+        coordinate_system=pycolmap.PosePriorCoordinateSystem.CARTESIAN,
+    )
 
 
 def verify(db_path: str | Path, options: ColmapOptions) -> None:
@@ -378,10 +394,13 @@ def map_database(
     work_dir: str | Path,
     options: ColmapOptions,
     stages: StageLog | None = None,
+    use_priors: bool = False,
 ) -> pycolmap.Reconstruction | None:
     """Run the mapper; return the model with the most registered images (joined with the
     others where ``options.join_models`` says so), or ``None`` if none.  ``stages``: where
-    to record the mapping and the joining as stages."""
+    to record the mapping and the joining as stages.  ``use_priors``: the incremental mapper
+    holds the cameras near the database's position priors in bundle adjustment and returns
+    the model in their frame (the global mapper does not take them: refused)."""
     pycolmap.set_random_seed(options.seed)
     threads = options.num_threads if options.mapper_threads is None else options.mapper_threads
     work_dir = Path(work_dir)
@@ -395,12 +414,15 @@ def map_database(
         opts.triangulation.ignore_two_view_tracks = not options.two_view_tracks
         opts.ba_refine_focal_length = options.refine_focal_length
         opts.ba_refine_extra_params = options.refine_extra_params
+        opts.use_prior_position = use_priors
         with _stage(stages, "mapping (incremental, with bundle adjustment)"):
             models = pycolmap.incremental_mapping(str(db_path), str(image_dir), str(work_dir), opts)
         if len(models) > 1 and options.join_models:
             with _stage(stages, f"joining {len(models)} models (triangulation, bundle adjustment)"):
                 return join_models(models.values(), db_path, image_dir, work_dir, opts)
     elif options.mapper == "global":
+        if use_priors:
+            raise LBurstValueError("position priors need the incremental mapper (--mapper incremental)")
         opts = pycolmap.GlobalPipelineOptions()
         opts.num_threads = threads
         opts.random_seed = options.seed
@@ -509,7 +531,10 @@ def run_job(job_dir: str | Path) -> dict:
             **{f"inl_{q}": m for q, m in enumerate(inliers)},
         )
     mapping = time.perf_counter()
-    rec = map_database(db_path, job.image_dir, job_dir / "mapper", job.options, stages) if len(v_pairs) else None
+    priors = job.positions is not None and any(p is not None for p in job.positions)
+    rec = (
+        map_database(db_path, job.image_dir, job_dir / "mapper", job.options, stages, priors) if len(v_pairs) else None
+    )
     mapped = time.perf_counter()
     if rec is not None:
         with stages.stage("export"):

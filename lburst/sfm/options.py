@@ -11,6 +11,7 @@ from pathlib import Path
 from lburst.burst.sources import RecordingOptions
 from lburst.cluster.spec import ClusterSpec, parse_cluster
 from lburst.errors import LBurstValueError
+from lburst.sfm.positions import DEFAULT_STD_M, check_std
 
 AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto' for a scene: exhaustive up to this many images, else sequential
 SCENE_OVERLAP = 10  # sequential pairs of a scene: neighbours on each side
@@ -100,6 +101,9 @@ class ReconstructOptions:
         cluster: run the features and matching stages on this cluster (:mod:`lburst.cluster`):
             a :class:`lburst.cluster.spec.ClusterSpec` or its text (``'local:4'``,
             ``'tcp://HOST:PORT'``); ``None``: in this process.
+        positions: a positions file (``NAME X Y Z`` per image, :mod:`lburst.sfm.positions`):
+            the incremental mapper holds each camera near its prior, ``position_std`` metres
+            on each coordinate; ``None``: no priors (vision alone).
     """
 
     pairs: Pairs = Pairs.AUTO
@@ -123,10 +127,15 @@ class ReconstructOptions:
     matcher: str = "mnn"
     features: str | Path | None = None
     cluster: ClusterSpec | str | None = None
+    positions: str | Path | None = None
+    position_std: float = DEFAULT_STD_M
 
     def __post_init__(self) -> None:
+        self.position_std = check_std(self.position_std)
         self.pairs = _enum(Pairs, self.pairs, "pairing")
         self.camera = _enum(Camera, self.camera, "camera option")
         self.mapper = _enum(Mapper, self.mapper, "mapper")
+        if self.positions is not None and self.mapper == Mapper.GLOBAL:
+            raise LBurstValueError("--positions needs the incremental mapper: COLMAP's global mapper takes no priors")
         if isinstance(self.cluster, str):
             self.cluster = parse_cluster(self.cluster)

@@ -39,6 +39,7 @@ from lburst.sfm.metrics import evaluate_against_reference, scene_metrics
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import write_outputs
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs, pair_plan
+from lburst.sfm.positions import parse_positions, read_positions
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult, Status, ended
 from lburst.sfm.retrieval import retrieval_pairs, vlad
 from lburst.sfm.scene import SceneError
@@ -76,6 +77,8 @@ def _reconstruct(
     scene_dir: str | Path, method_spec: str, out_dir: str | Path, opts: ReconstructOptions, extractor, runner: Runner
 ) -> ReconstructionResult:
     source = open_input(scene_dir, opts.recording)  # the one question about the kind of input
+    if opts.positions is not None:
+        parse_positions(opts.positions)  # a bad file is refused before the features are computed
     if opts.single_camera is None:  # one camera shot a recording; a scene's photos may come from several
         opts = replace(opts, single_camera=source.one_camera)
     out = Path(out_dir)
@@ -135,6 +138,10 @@ def _reconstruct(
         },
     )
     job = ColmapJob(scene.names, str((out / "images").resolve()), cams.cameras, cams.camera_of_image, colmap_options)
+    if opts.positions is not None:
+        centres = read_positions(opts.positions, scene.names)
+        job.positions = [None if np.isnan(c).any() else c.tolist() for c in centres]
+        job.position_std = opts.position_std
     job_dir = out / "colmap"
     job_dir.mkdir(parents=True, exist_ok=True)
     result = ReconstructionResult(str(scene.root), method_spec, str(out), scene.names)

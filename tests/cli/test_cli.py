@@ -72,6 +72,14 @@ def test_simulate_flight_takes_out_as_an_option(tmp_path):
         == 0
     )
     assert (tmp_path / "scene" / "reference.json").is_file()
+    # and a receiver's log of the same cameras, 2 m of noise by default, for --positions
+    from lburst.scenes.reference import Reference
+    from lburst.sfm.positions import parse_positions
+
+    logged = parse_positions(tmp_path / "scene" / "positions.txt")
+    truth = {name: -R.T @ t for name, (R, t) in Reference.load(tmp_path / "scene" / "reference.json").poses.items()}
+    assert sorted(logged) == sorted(truth) == ["0000", "0001"]
+    assert all(0 < abs(logged[n] - truth[n]).max() < 10 for n in truth)
 
 
 def test_os_errors_are_one_line_naming_the_path(tmp_path):
