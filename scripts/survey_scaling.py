@@ -234,11 +234,13 @@ def table(data: dict) -> str:
     for key in sorted(data["runs"], key=lambda k: (int(k.split("/")[0].split("@")[0]), k)):
         n, mapper = key.split("/")
         r, f = data["runs"][key], data["features"].get(n, {})
+        computed = f.get("computed")
+        share = f" ({computed} computed)" if computed is not None and computed < int(n.split("@")[0]) else ""
         n = n.replace("@", " on a loop of ")
         ate = "-" if r["ate_m"] is None else f"{r['ate_m']:.3g}"
         pct = "-" if r["ate_pct"] is None else f"{r['ate_pct']:.2f}"
         lines.append(
-            f"| {n} | {mapper} | {f.get('decode', {}).get('s', '-')} | {f.get('features', {}).get('s', '-')} "
+            f"| {n} | {mapper} | {f.get('decode', {}).get('s', '-')} | {f.get('features', {}).get('s', '-')}{share} "
             f"| {r['pairs']['s']} | {r['pairs']['count']} | {r['matches']['s']} | {r['colmap']['s']} "
             f"| {colmap_seconds(r, 'geometric verification')} / {colmap_seconds(r, 'mapping')} "
             f"| {f.get('features', {}).get('peak_mib', '-')} / {r['matches']['peak_mib']} / {r['colmap']['peak_mib']} "
