@@ -84,6 +84,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "180 trains descriptors to match views turned any way",
     )
     p.add_argument(
+        "--noise-std",
+        type=real(0, 255),
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        help="range of the Gaussian noise's std on 0..255, drawn per burst (presets: 5 110; burst, aligned: 25 120)",
+    )
+    p.add_argument(
         "--sensor-prob",
         type=real(0, 1),
         metavar="P",
@@ -153,7 +160,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         try:
             cfg = replace(cfg, pair=replace(cfg.pair, **pair))
         except LBurstValueError as exc:
-            raise LBurstValueError(f"--sensor-prob/--sensors: {exc}") from exc
+            raise LBurstValueError(f"--noise-std/--sensor-prob/--sensors: {exc}") from exc
     if args.frames is not None:
         cfg = replace(cfg, pair=replace(cfg.pair, frames=args.frames))
     elif cfg.pair.frames != cfg.frames:
@@ -169,12 +176,25 @@ def given_pair_options(args: argparse.Namespace) -> dict:
     """The PairConfig fields set on the command line (``None``: not given)."""
     return {
         "max_rotation_deg": getattr(args, "max_rotation", None),
+        "noise_std": tuple(args.noise_std) if getattr(args, "noise_std", None) else None,
         "sensor_prob": getattr(args, "sensor_prob", None),
         "sensors": tuple(args.sensors) if getattr(args, "sensors", None) else None,
     }
 
 
-PAIR_FLAGS = {"max_rotation_deg": "--max-rotation", "sensor_prob": "--sensor-prob", "sensors": "--sensors"}
+PAIR_FLAGS = {
+    "max_rotation_deg": "--max-rotation",
+    "noise_std": "--noise-std",
+    "sensor_prob": "--sensor-prob",
+    "sensors": "--sensors",
+}
+
+
+def _shown(value) -> str:
+    """A pair option as it is written on the command line."""
+    if isinstance(value, (list, tuple)):
+        return " ".join(v if isinstance(v, str) else f"{v:g}" for v in value)
+    return f"{value:g}"
 
 
 def _check_resumed_pairs(out: Path, given: dict) -> None:
@@ -188,8 +208,7 @@ def _check_resumed_pairs(out: Path, given: dict) -> None:
             continue
         old = saved.get(name, PairConfig.__dataclass_fields__[name].default)
         if (tuple(old) if isinstance(old, list) else old) != value:
-            shown = " ".join(value) if isinstance(value, tuple) else f"{value:g}"
-            kept = " ".join(old) if isinstance(old, (list, tuple)) else f"{old:g}"
+            shown, kept = _shown(value), _shown(old)
             raise LBurstValueError(
                 f"{out}: a resumed run keeps its own settings; leave out {PAIR_FLAGS[name]} {shown} (the run has {kept})"
             )

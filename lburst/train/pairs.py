@@ -87,6 +87,9 @@ class PairConfig:
     align_error_px: float | None = None
 
     def __post_init__(self) -> None:
+        low, high = self.noise_std
+        if not 0.0 <= low <= high:
+            raise LBurstValueError(f"noise_std ({low:g}, {high:g}) must be a range LOW <= HIGH of stds >= 0")
         if not 0.0 <= self.sensor_prob <= 1.0 - self.lowlight_prob:
             raise LBurstValueError(
                 f"sensor_prob {self.sensor_prob} must lie in [0, 1 - lowlight_prob] = [0, {1.0 - self.lowlight_prob:g}]"

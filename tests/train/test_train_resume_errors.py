@@ -151,7 +151,7 @@ def test_sensor_options_set_the_pairs_are_checked_and_a_resumed_run_keeps_its_ow
     new = ["--out", str(tmp_path / "new"), "--preset", "aligned"]
     cfg = config_from_args(parser.parse_args([*new, "--sensor-prob", "0.3", "--sensors", "imx686@6400"]))
     assert (cfg.pair.sensor_prob, cfg.pair.sensors, cfg.pair.lowlight_prob) == (0.3, ("imx686@6400",), 0.33)
-    with pytest.raises(LBurstValueError, match=r"--sensor-prob/--sensors: .*no calibration at ISO 100"):
+    with pytest.raises(LBurstValueError, match=r"--noise-std/--sensor-prob/--sensors: .*no calibration at ISO 100"):
         config_from_args(parser.parse_args([*new, "--sensor-prob", "0.3", "--sensors", "imx686@100"]))
     with pytest.raises(LBurstValueError, match=r"sensor_prob 0.9 must lie in \[0, 1 - lowlight_prob\] = \[0, 0.67\]"):
         config_from_args(parser.parse_args([*new, "--sensor-prob", "0.9"]))
@@ -160,3 +160,20 @@ def test_sensor_options_set_the_pairs_are_checked_and_a_resumed_run_keeps_its_ow
         _check_resumed_pairs(tmp_path, {"sensor_prob": 0.3})
     with pytest.raises(ValueError, match=r"leave out --sensors a7s2@1600 \(the run has imx686@6400 a7s2@1600"):
         _check_resumed_pairs(tmp_path, {"sensors": ("a7s2@1600",)})
+
+
+def test_the_noise_range_is_set_checked_and_kept_by_a_resumed_run(tmp_path):
+    from lburst.cli.train import _check_resumed_pairs
+    from lburst.errors import LBurstValueError
+
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    new = ["--out", str(tmp_path / "new"), "--preset", "aligned"]
+    assert config_from_args(parser.parse_args(new)).pair.noise_std == (25.0, 120.0)  # the preset's
+    assert config_from_args(parser.parse_args([*new, "--noise-std", "50", "140"])).pair.noise_std == (50.0, 140.0)
+    with pytest.raises(LBurstValueError, match=r"noise_std \(140, 50\) must be a range LOW <= HIGH"):
+        config_from_args(parser.parse_args([*new, "--noise-std", "140", "50"]))
+    (tmp_path / "config.json").write_text(json.dumps({"pair": {"noise_std": [25.0, 120.0]}}))
+    with pytest.raises(ValueError, match=r"leave out --noise-std 50 140 \(the run has 25 120\)"):
+        _check_resumed_pairs(tmp_path, {"noise_std": (50.0, 140.0)})
+    _check_resumed_pairs(tmp_path, {"noise_std": (25.0, 120.0)})
