@@ -14,18 +14,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lburst.sfm.options import GLOBAL_MAPPER_FROM, ReconstructOptions
+from lburst.sfm import pairs
+from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.pairs import pair_plan
 
 
 @pytest.mark.parametrize("recording", [False, True])
-def test_large_inputs_get_sequential_pairs_and_auto_the_global_mapper(recording):
-    for n in (GLOBAL_MAPPER_FROM - 1, GLOBAL_MAPPER_FROM, 5000):
+def test_large_inputs_get_sequential_pairs_and_auto_the_measured_mapper(recording, monkeypatch):
+    for n in (999, 1000, 5000):
         plan = pair_plan(n, ReconstructOptions(mapper="auto", retrieval=5), recording)
         assert plan.mode == "sequential" and plan.retrieval == 5
-        assert plan.mapper == ("global" if n >= GLOBAL_MAPPER_FROM else "incremental")
-    assert pair_plan(5000, ReconstructOptions(), recording).mapper == "incremental"  # the default stays
+        # the global mapper was 15 % of the path off at 100-1000 keyframes: auto never picks it
+        assert plan.mapper == "incremental"
+    assert pair_plan(5000, ReconstructOptions(), recording).mapper == "incremental"  # the default
     assert pair_plan(1000, ReconstructOptions(mapper="global"), recording).mapper == "global"
+    monkeypatch.setattr(pairs, "GLOBAL_MAPPER_FROM", 1000)  # a switch by size, where one is measured
+    assert [pair_plan(n, ReconstructOptions(mapper="auto"), recording).mapper for n in (999, 1000)] == [
+        "incremental",
+        "global",
+    ]
     # position priors go to the incremental mapper only: auto picks it at any size
     assert pair_plan(5000, ReconstructOptions(mapper="auto", positions="p.txt"), recording).mapper == "incremental"
 

@@ -24,9 +24,10 @@ RECORDING_NEAR = 2
 RECORDING_RETRIEVAL = 5
 LOOP_FRACTION = 0.4
 RECORDING_ABS_POSE_INLIERS = 10
-# mapper='auto': the global mapper from this many images on; at 100 it was not faster and 19x less
-# accurate than the incremental one (docs/large_surveys.md), and the 1000-keyframe row decides the rest
-GLOBAL_MAPPER_FROM = 1000
+# mapper='auto': the global mapper from this many images on (None: never).  On the simulated loops of
+# 100, 300 and 1000 keyframes it mapped 14.5-15 % of the path off, against 0.76, 3.19 and 1.78 % for
+# the incremental mapper (docs/large_surveys.md), so auto does not pick it at any size measured
+GLOBAL_MAPPER_FROM: int | None = None
 
 
 class Pairs(StrEnum):
@@ -48,7 +49,7 @@ class Camera(StrEnum):
 class Mapper(StrEnum):
     """COLMAP's mapper (:func:`lburst.sfm.pairs.pair_plan` resolves ``auto`` by the image count)."""
 
-    AUTO = "auto"  # incremental below GLOBAL_MAPPER_FROM images, global from there (docs/large_surveys.md)
+    AUTO = "auto"  # the mapper measured best at the image count: incremental up to 1000 (docs/large_surveys.md)
     INCREMENTAL = "incremental"
     GLOBAL = "global"
 
@@ -74,7 +75,7 @@ class ReconstructOptions:
         camera (:class:`Camera`), camera_model, single_camera, fix_intrinsics: cameras
             (:mod:`lburst.sfm.cameras`).
         mapper: :class:`Mapper`, ``'incremental'``, ``'global'`` or ``'auto'`` (incremental
-            below ``GLOBAL_MAPPER_FROM`` images, global from there: docs/large_surveys.md).
+            from ``GLOBAL_MAPPER_FROM`` images if set, else incremental: docs/large_surveys.md).
         num_threads, seed: for COLMAP (repeatable for one thread count).
         progress: tqdm bars, and a line on stderr per stage of matching and COLMAP with its seconds.
         extra: further :class:`lburst.sfm.colmap.ColmapOptions` fields, e.g. ``max_num_trials``.

@@ -75,9 +75,9 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
     scale can drift along the chain), mapped with one thread (repeatable).  A scene keeps exhaustive pairs up to
     ``AUTO_EXHAUSTIVE_MAX`` images, sequential with overlap 10 beyond, no retrieval, no
     loop test, COLMAP's 30 and COLMAP's triangulation, unless the options say otherwise.
-    ``mapper='auto'`` is the incremental mapper below ``GLOBAL_MAPPER_FROM`` images and the
-    global one from there (docs/large_surveys.md), and always the incremental one with
-    position priors (``opts.positions``), which only it takes.
+    ``mapper='auto'`` is the global mapper from ``GLOBAL_MAPPER_FROM`` images (``None``: never,
+    the measured choice: docs/large_surveys.md) and else the incremental one, always the
+    incremental one with position priors (``opts.positions``), which only it takes.
     """
     if recording:
         mode = Pairs.SEQUENTIAL if opts.pairs == Pairs.AUTO else opts.pairs
@@ -97,7 +97,7 @@ def pair_plan(n: int, opts: ReconstructOptions, recording: bool) -> PairPlan:
     mapper_threads = opts.mapper_threads if opts.mapper_threads is not None else (1 if recording else None)
     mapper = opts.mapper
     if mapper == Mapper.AUTO:
-        global_ = n >= GLOBAL_MAPPER_FROM and opts.positions is None
+        global_ = GLOBAL_MAPPER_FROM is not None and n >= GLOBAL_MAPPER_FROM and opts.positions is None
         mapper = Mapper.GLOBAL if global_ else Mapper.INCREMENTAL
     return PairPlan(
         str(mode),
