@@ -106,13 +106,12 @@ def child_reconstruct(args: argparse.Namespace) -> dict:
     import torch
 
     import lburst.sfm.reconstruct as rec
-    import lburst.sfm.retrieval as retrieval
     from lburst.sfm.options import ReconstructOptions
 
     torch.set_num_threads(args.threads)
     pairs, matches, colmap = Stage(), Stage(), Stage()
     rec.pair_plan, rec.make_pairs = pairs.wrap(rec.pair_plan), pairs.wrap(rec.make_pairs)
-    retrieval.vlad, retrieval.retrieval_pairs = pairs.wrap(retrieval.vlad), pairs.wrap(retrieval.retrieval_pairs)
+    rec.vlad, rec.retrieval_pairs = pairs.wrap(rec.vlad), pairs.wrap(rec.retrieval_pairs)  # as reconstruct calls them
     rec.match_pairs_with_scores = matches.wrap(rec.match_pairs_with_scores)
     lines: list[str] = []
     run_job = rec.run_job_subprocess
