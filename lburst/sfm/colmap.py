@@ -300,7 +300,8 @@ def write_database(
             rig.add_ref_sensor(cam.sensor_id)
             camera_ids.append(cam.camera_id)
             rig_ids.append(db.write_rig(rig))
-        for name, cam_index, kp in zip(job.names, job.camera_of_image, keypoints):
+        positions = job.positions or [None] * len(job.names)
+        for name, cam_index, kp, position in zip(job.names, job.camera_of_image, keypoints, positions):
             image = pycolmap.Image(name=image_file(name), camera_id=camera_ids[cam_index])
             image.image_id = db.write_image(image)
             frame = pycolmap.Frame()
@@ -309,8 +310,8 @@ def write_database(
             db.write_frame(frame)
             db.write_keypoints(image.image_id, np.ascontiguousarray(kp, dtype=np.float32) + np.float32(0.5))
             image_ids.append(image.image_id)
-            if job.positions is not None and job.positions[len(image_ids) - 1] is not None:
-                db.write_pose_prior(_position_prior(image.data_id, job.positions[len(image_ids) - 1], job.position_std))
+            if position is not None:
+                db.write_pose_prior(_position_prior(image.data_id, position, job.position_std))
         for (a, b), m in zip(pairs, matches):
             db.write_matches(image_ids[a], image_ids[b], np.ascontiguousarray(m, dtype=np.uint32))
     return image_ids

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from lburst.errors import LBurstValueError
+from lburst.numbers import check_real
 
 #: the positions file ``lburst simulate flight`` writes into a scene
 POSITIONS_FILE = "positions.txt"
@@ -86,8 +87,4 @@ def write_positions(path: str | Path, centres: dict[str, np.ndarray]) -> None:
 
 def check_std(std: float) -> float:
     """A prior's standard deviation (m): finite and positive."""
-    if not (isinstance(std, (int, float)) and math.isfinite(std) and std > 0):
-        raise LBurstValueError(
-            f"the position prior's standard deviation must be a positive number of metres, got {std!r}"
-        )
-    return float(std)
+    return check_real(std, "the position prior's standard deviation (m)", 0, low_open=True)
