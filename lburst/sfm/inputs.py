@@ -115,7 +115,7 @@ class InputSource(ABC):
         compute = compute_for(spec, runner, extractor)
         done: dict[str, Features] = {}
         try:
-            for extracted_burst in keyframe_features(named, compute, layout, runner=runner):
+            for extracted_burst in keyframe_features(named, compute, layout, runner=runner, progress=opts.progress):
                 done[extracted_burst.burst.name] = extracted_burst.features
         except BurstError as err:  # the input itself cannot be read
             raise ReconstructionError(str(err)) from err

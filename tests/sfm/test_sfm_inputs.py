@@ -14,6 +14,7 @@ from lburst import store
 from lburst.burst.io import save_burst
 from lburst.burst.sources import RecordingOptions
 from lburst.sfm.inputs import BurstInput, RecordingInput, SceneInput, open_bursts, open_input
+from lburst.sfm.options import ReconstructOptions
 
 ROOT = Path(lburst.__file__).parent
 
@@ -84,3 +85,15 @@ def test_every_source_yields_named_bursts_keyed_as_the_store_keys_them(tmp_path)
     assert [b.index for b in bursts] == [0, 4, 8] and bursts[1].load().shape == (3, 24, 32, 3)
     assert {b.key["source"]["keyframe"] for b in bursts} == {b.name for b in bursts}
     assert len({b.key["source"]["sha1"] for b in bursts}) == 1
+
+
+def test_reading_a_scene_shows_a_bar_over_its_bursts_only_when_asked(tmp_path, capsys):
+    """``lburst reconstruct`` spends most of its time on features: a bar says how far it is."""
+    frames = np.random.default_rng(0).integers(0, 255, (3, 48, 64, 3), dtype=np.uint8)
+    for name in ("b0", "b1"):
+        save_burst(frames, tmp_path / "scene" / name)
+    source = SceneInput(tmp_path / "scene")
+    source.read("sift", tmp_path / "quiet", ReconstructOptions(progress=False))
+    assert "features" not in capsys.readouterr().err
+    keyframes = source.read("sift", tmp_path / "loud", ReconstructOptions(progress=True))
+    assert "features: " in capsys.readouterr().err and len(keyframes.features) == 2
