@@ -11,7 +11,9 @@ method has the same key wherever it was computed (``lburst extract`` of a record
   (:func:`lburst.methods.learned.results_key`), so retrained weights are not served
   old features, plus the options given besides the spec (``top_k``, ``precision``), an
   option left out when it has the method's default value (``--top-k 4000`` is the
-  default of a learned method, so ``extract`` and ``reconstruct`` key it alike);
+  default of a learned method, so ``extract`` and ``reconstruct`` key it alike), and the
+  revision of the extraction code (:data:`REVISION`), so a change of it is not served old
+  features either;
 - ``source``: the burst's absolute ``path`` and ``sha1``, the SHA-1 of its content
   (:func:`content_sha1`), so changed frames are computed again; for a recording's keyframe,
   the recording's path, ``sha1`` its content and cut (:func:`recording_content`) and
@@ -97,14 +99,20 @@ def _default_options(spec: str) -> dict[str, str]:
     }
 
 
+#: the revision of the code that turns a burst into features, raised when it changes what a
+#: method returns for the same burst and weights, so that no stored file of the old code is
+#: served (2: bursts that turn are aligned with their rotation, :mod:`lburst.burst.turning`)
+REVISION = 2
+
+
 def method_key(spec: str, **options: Any) -> dict[str, Any]:
-    """The ``method`` part of a key: the spec with its weights' SHA-1, and the options given
-    besides it, less those that are ``None`` or the method's default."""
+    """The ``method`` part of a key: the spec with its weights' SHA-1, the options given
+    besides it (less those that are ``None`` or the method's default), and :data:`REVISION`."""
     from lburst.methods.learned import results_key
 
     defaults = _default_options(spec)
     given = {k: str(v) for k, v in sorted(options.items()) if v is not None and defaults.get(k) != str(v)}
-    return {"spec": results_key(spec), "options": given}
+    return {"spec": results_key(spec), "options": given, "revision": REVISION}
 
 
 def key(

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 
 from lburst import store
-from lburst.burst.io import read_image
+from lburst.burst.io import read_image, save_burst
 from lburst.methods import create
 from lburst.model.network import LBurstNet, NetConfig, save_checkpoint
 from lburst.sfm import reconstruct_scene
@@ -55,7 +55,27 @@ def test_an_option_at_its_default_value_does_not_change_the_key():
     )
     assert store.method_key("lburst", top_k=2000) != store.method_key("lburst")
     assert store.method_key("lburst,top_k=2000", top_k=4000) != store.method_key("lburst,top_k=2000")
-    assert store.method_key("sift") == {"spec": "sift", "options": {}}
+    assert store.method_key("sift") == {"spec": "sift", "options": {}, "revision": store.REVISION}
+
+
+def test_features_of_an_earlier_revision_of_the_extraction_are_computed_again(tmp_path, monkeypatch):
+    """Stored features of the code before a change of what it extracts (:data:`lburst.store.REVISION`)
+    are not served."""
+    burst = tmp_path / "b0"
+    save_burst(np.stack([_photo(k) for k in range(3)]), burst)
+    path = tmp_path / "b0.npz"
+    old = store.key(store.method_key("sift"), burst)
+    features = {
+        "keypoints": np.array([[3.0, 4.0]], np.float32),
+        "scales": np.ones(1, np.float32),
+        "scores": np.ones(1, np.float32),
+        "descriptors": np.ones((1, 8), np.float32),
+        "image_size": np.array([160, 120]),
+    }
+    store.save(path, features, None, old)
+    assert store.load(path, old) is not None
+    monkeypatch.setattr(store, "REVISION", store.REVISION + 1)
+    assert store.load(path, store.key(store.method_key("sift"), burst)) is None
 
 
 def test_reconstruct_uses_the_keyframe_features_that_extract_stored(tmp_path, monkeypatch):

@@ -1,5 +1,7 @@
-"""Translational alignment of burst frames to the common (middle) frame: the shifts
-(:func:`estimate_shifts`) and the aligned burst (:func:`align_burst`), used by the
+"""Alignment of burst frames to the common (middle) frame: the shifts
+(:func:`estimate_shifts`), the warps with the rotation of bursts that turn
+(:func:`estimate_warps`, :mod:`lburst.burst.turning`) and the aligned burst
+(:func:`align_burst`), used by the
 ``merge`` and ``align`` methods, BuFF, training pairs and :class:`lburst.LBurst` (for
 weights run on aligned bursts).
 
@@ -27,6 +29,7 @@ import cv2
 import numpy as np
 
 from lburst.burst.frames import check_burst, gray_unit, time_offsets
+from lburst.burst.turning import euclidean_warps
 from lburst.errors import LBurstValueError
 from lburst.extras import require
 
@@ -139,6 +142,18 @@ def pyramid_shifts(
     ``eps`` px or ``iterations``).  No motion model: :func:`estimate_shifts` fits one.
     """
     burst = check_burst(burst)
+    return _pyramid(burst, smoothing, iterations, eps, max_pixels)[-1]
+
+
+def _pyramid(
+    burst: np.ndarray,
+    smoothing: int = 7,
+    iterations: int = 50,
+    eps: float = 1e-4,
+    max_pixels: int = PYRAMID_MAX_PIXELS,
+) -> tuple[tuple[int, list[np.ndarray]], tuple[int, list[np.ndarray]], np.ndarray]:
+    """:func:`pyramid_shifts` with the grey frames it computed on the way:
+    ``((fine, fine_frames), (coarse, coarse_frames), shifts)``."""
     n, h, w = burst.shape[:3]
     middle = n // 2
     fine, coarse = pyramid_scales(h, w, max_pixels)
@@ -161,7 +176,7 @@ def pyramid_shifts(
             eps=eps,
         )
         shifts[k] = refined * fine
-    return shifts
+    return (fine, fine_frames), (coarse, coarse_frames), shifts
 
 
 def fit_linear(shifts: np.ndarray) -> np.ndarray:
@@ -223,12 +238,44 @@ def warp_frame(frame: np.ndarray, shift: np.ndarray, interpolation: int = cv2.IN
     return out.reshape(frame.shape)
 
 
+def translation_warps(shifts: np.ndarray) -> np.ndarray:
+    """The shifts ``(N, 2)`` as warps ``(N, 2, 3)`` (:mod:`lburst.burst.turning`'s convention)."""
+    shifts = np.asarray(shifts, np.float64)
+    warps = np.zeros((len(shifts), 2, 3))
+    warps[:, 0, 0] = warps[:, 1, 1] = 1
+    warps[:, :, 2] = shifts
+    return warps
+
+
+def estimate_warps(burst: np.ndarray, motion: Motion = "linear", turn: bool = True) -> np.ndarray:
+    """Warps ``(N, 2, 3)`` float64 of each frame onto the common frame (``frame_k(W_k p) ~ common(p)``):
+    the translations of :func:`estimate_shifts` (``'pyramid'``, ``motion``); with ``turn``, where
+    the burst turns, a rotation and a translation per frame instead
+    (:func:`lburst.burst.turning.euclidean_warps`, no motion model)."""
+    if motion not in ("free", "linear"):
+        raise LBurstValueError(f"unknown motion model {motion!r}: use 'free' or 'linear'")
+    burst = check_burst(burst)
+    fine, coarse, shifts = _pyramid(burst)
+    if turn:
+        warps = euclidean_warps(fine, coarse, shifts)
+        if warps is not None:
+            return warps
+    return translation_warps(fit_linear(shifts) if motion == "linear" else shifts)
+
+
 def align_burst(
-    burst: np.ndarray, shifts: np.ndarray | None = None, method: Method = "pyramid", motion: Motion = "linear"
+    burst: np.ndarray,
+    shifts: np.ndarray | None = None,
+    method: Method = "pyramid",
+    motion: Motion = "linear",
+    turn: bool = True,
 ) -> np.ndarray:
     """Every frame resampled onto the common frame (bilinear, replicated borders), in
-    the burst's dtype: the burst as it would be without its motion (the estimated
-    shifts unless ``shifts`` are given).  The common frame is returned untouched.
+    the burst's dtype: the burst as it would be without its motion.  ``shifts`` ``(N, 2)``
+    or warps ``(N, 2, 3)`` (:func:`estimate_warps`) when given; else the estimated shifts
+    (``method``, ``motion``), and with ``'pyramid'`` and ``turn`` the frames' rotation too
+    where the burst turns (:mod:`lburst.burst.turning`; a burst that does not turn is
+    aligned by its shifts alone).  The common frame is returned untouched.
 
     The warp runs in the burst's dtype (OpenCV, rounded): for uint16 it equals the
     float warp rounded; for uint8 OpenCV's fixed-point weights differ from it by 1 in
@@ -236,17 +283,25 @@ def align_burst(
     burst = check_burst(burst)
     n, h, w = burst.shape[:3]
     if shifts is None:
-        shifts = estimate_shifts(burst, method=method, motion=motion)
-    shifts = np.asarray(shifts, np.float64)
-    if shifts.shape != (n, 2):
-        raise LBurstValueError(f"shifts must be ({n}, 2) for a {n}-frame burst, got {shifts.shape}")
+        if method == "pyramid":
+            warps = estimate_warps(burst, motion, turn)
+        else:
+            warps = translation_warps(estimate_shifts(burst, method=method, motion=motion))
+    else:
+        warps = np.asarray(shifts, np.float64)
+        if warps.shape == (n, 2):
+            warps = translation_warps(warps)
+        if warps.shape != (n, 2, 3):
+            raise LBurstValueError(
+                f"shifts must be ({n}, 2) or warps ({n}, 2, 3) for a {n}-frame burst, got {warps.shape}"
+            )
+    identity = translation_warps(np.zeros((1, 2)))[0]
     out = np.empty(burst.shape, burst.dtype)  # C order: every out[k] is a contiguous frame OpenCV writes into
     for k in range(n):
-        if np.any(shifts[k] != 0):
-            matrix = np.array([[1, 0, shifts[k, 0]], [0, 1, shifts[k, 1]]], np.float32)
+        if np.any(warps[k] != identity):
             warped = cv2.warpAffine(
                 np.ascontiguousarray(burst[k]),
-                matrix,
+                warps[k].astype(np.float32),
                 (w, h),
                 dst=out[k],
                 flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
