@@ -1,5 +1,7 @@
 """Burst alignment speed and accuracy: seconds per 1024x768 5-frame burst and shift error
-against the true shifts, per method of :func:`lburst.burst.align.estimate_shifts`.
+against the true shifts, per method of :func:`lburst.burst.align.estimate_shifts`, and for
+``turning``: :func:`lburst.burst.align.estimate_warps`, the default of ``align_burst`` (the
+pyramid's shifts plus the check whether the burst turns; these bursts do not).
 
 Bursts are simulated (:func:`lburst.simulate.simulate_burst`) from textured photos
 resized to ``--size`` (skimage's astronaut, coffee and chelsea, plus ``--photos`` photos
@@ -34,7 +36,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from lburst.burst.align import METHODS, align_burst, estimate_shifts
+from lburst.burst.align import METHODS, align_burst, estimate_shifts, estimate_warps
 from lburst.model.precision import cpu_name
 from lburst.noise import GaussianNoise, noise_from_spec
 from lburst.paths import shared_dir
@@ -74,7 +76,7 @@ def noise_model(spec: str):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--methods", default="ecc,phase,pyramid", help="comma-separated methods")
+    parser.add_argument("--methods", default="ecc,phase,pyramid,turning", help="comma-separated methods")
     parser.add_argument("--noise", default="0,25,50,100,lowlight:night", help="comma-separated noise levels")
     parser.add_argument("--photos", type=int, default=3, help="photos from the shared training set (if present)")
     parser.add_argument("--motions", type=int, default=2, help="random velocities per photo")
@@ -90,9 +92,9 @@ def main() -> None:
     args = parser.parse_args()
 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    unknown = [m for m in methods if m not in METHODS]
+    unknown = [m for m in methods if m not in (*METHODS, "turning")]
     if unknown:
-        parser.error(f"unknown methods {unknown}: use {', '.join(METHODS)}")
+        parser.error(f"unknown methods {unknown}: use {', '.join(METHODS)} or turning")
     noises = [n.strip() for n in args.noise.split(",") if n.strip()]
     width, height = (int(v) for v in args.size.lower().split("x"))
     cv2.setNumThreads(args.threads)
@@ -118,15 +120,22 @@ def main() -> None:
 
     results = {}
     for method in methods:
-        align_burst(bursts[0][3], method=method, motion=args.motion)  # warm-up
+
+        def estimate(burst: np.ndarray, method: str = method) -> np.ndarray:
+            if method == "turning":
+                return estimate_warps(burst, motion=args.motion)
+            return estimate_shifts(burst, method=method, motion=args.motion)
+
+        align_burst(bursts[0][3], estimate(bursts[0][3]))  # warm-up
         totals, cpu_totals, estimates, warps = [], [], [], []
         errors: dict[str, list[float]] = {noise: [] for noise in noises}
         for repeat in range(args.repeats):
             for noise, _, _, burst, truth in bursts:
                 cpu_start, start = time.process_time(), time.perf_counter()
-                shifts = estimate_shifts(burst, method=method, motion=args.motion)
+                motion = estimate(burst)
                 middle = time.perf_counter()
-                align_burst(burst, shifts)
+                align_burst(burst, motion)
+                shifts = motion[:, :, 2] if motion.ndim == 3 else motion
                 end, cpu_end = time.perf_counter(), time.process_time()
                 totals.append(end - start)
                 cpu_totals.append(cpu_end - cpu_start)

@@ -1,7 +1,8 @@
 """One call that maps a per-burst function over jobs, in this process or on a cluster:
 :meth:`Runner.map` yields ``(job, result)`` pairs where ``result()`` returns what the function
 returned for the job, or raises what it raised, so that the caller handles a failed burst as
-it would in a plain loop.  Both show a tqdm bar over finished jobs.
+it would in a plain loop.  Both show a tqdm bar over finished jobs, from :data:`BAR_DELAY_S`
+on, so that a map that ends at once (nothing to do, or an input error) prints nothing.
 
 On a cluster (:class:`ClusterRunner`) jobs are submitted as the caller's iterator gives them,
 at most a few per worker ahead (:data:`AHEAD_PER_WORKER`), so a stream of keyframe bursts
@@ -24,6 +25,8 @@ from lburst.cluster.spec import ClusterSpec
 
 #: tasks in flight per worker: one running, the next ones already shipped
 AHEAD_PER_WORKER = 2
+#: seconds before a map's bar appears (tqdm's ``delay``)
+BAR_DELAY_S = 1.0
 
 
 class Runner:
@@ -38,7 +41,7 @@ class Runner:
     def map(
         self, function: Callable, jobs: Iterable, desc: str, progress: bool = True, total: int | None = None, **bar
     ) -> Iterator[tuple[Any, Callable[[], Any]]]:
-        for job in tqdm(jobs, desc=desc, total=total, disable=not progress, leave=False, **bar):
+        for job in tqdm(jobs, desc=desc, total=total, disable=not progress, leave=False, delay=BAR_DELAY_S, **bar):
             yield job, partial(function, job)
 
     def share(self, values: list) -> list:
@@ -87,7 +90,7 @@ class ClusterRunner(Runner):
                 done.add(future)
 
         submit()
-        with tqdm(desc=desc, total=total, disable=not progress, leave=False, **bar) as counter:
+        with tqdm(desc=desc, total=total, disable=not progress, leave=False, delay=BAR_DELAY_S, **bar) as counter:
             while pending:
                 future = next(done)
                 job = pending.pop(future)

@@ -87,8 +87,10 @@ def test_every_source_yields_named_bursts_keyed_as_the_store_keys_them(tmp_path)
     assert len({b.key["source"]["sha1"] for b in bursts}) == 1
 
 
-def test_reading_a_scene_shows_a_bar_over_its_bursts_only_when_asked(tmp_path, capsys):
-    """``lburst reconstruct`` spends most of its time on features: a bar says how far it is."""
+def test_reading_a_scene_shows_a_bar_over_its_bursts_only_when_asked(tmp_path, capsys, monkeypatch):
+    """``lburst reconstruct`` spends most of its time on features: a bar says how far it is
+    (here at once; it waits :data:`lburst.cluster.runner.BAR_DELAY_S` otherwise)."""
+    monkeypatch.setattr("lburst.cluster.runner.BAR_DELAY_S", 0.0)
     frames = np.random.default_rng(0).integers(0, 255, (3, 48, 64, 3), dtype=np.uint8)
     for name in ("b0", "b1"):
         save_burst(frames, tmp_path / "scene" / name)
