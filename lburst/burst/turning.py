@@ -8,8 +8,9 @@ translation the networks were trained to take.  :func:`euclidean_warps` fits a r
 translation per frame (OpenCV's ECC with its Euclidean motion) and returns ``None`` when the
 fitted rotation moves no corner by :data:`ROTATION_MIN_PX` or more: such a burst is aligned by
 its translation alone, exactly as before.  It costs two ECC fits on a quarter of the pixels for
-a burst that does not turn (about 0.05 s at 640x480), and eight more at the pyramid's fine level
-for one that does (about 1.2 s at 640x480, one core).
+a burst that does not turn (6 ms at 1024x768), and eight more at the pyramid's fine level for
+one that does (0.10 s at 1024x768, whose fine level is half-resolution; 0.35 s at 640x480, whose
+is full resolution; one core, docs/speed.md).
 
 Warp convention (that of the shifts, extended): ``warps[k]`` is a 2x3 matrix ``W`` with
 ``frame_k(W @ (x, y, 1)) ~ common(x, y)``; the common frame's is the identity.
