@@ -28,8 +28,8 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from lburst.burst.frames import check_burst, gray_unit, time_offsets
-from lburst.burst.turning import euclidean_warps
+from lburst.burst.frames import check_burst, gray_unit, inner_mask, time_offsets
+from lburst.burst.turning import Level, euclidean_warps
 from lburst.errors import LBurstValueError
 from lburst.extras import require
 
@@ -72,13 +72,8 @@ def ecc_shift(
     after ``iterations`` or when an update moves the shift by less than ``eps`` px.  If
     ECC fails to converge the initial shift is returned.
     """
-    h, w = reference.shape
     pad = margin + int(np.ceil(np.abs(initial).max()))
-    mask = np.zeros((h, w), np.uint8)
-    if h > 2 * pad + 8 and w > 2 * pad + 8:
-        mask[pad : h - pad, pad : w - pad] = 1
-    else:
-        mask[:] = 1
+    mask = inner_mask(*reference.shape, pad, min_inner=8)
     warp = np.array([[1, 0, initial[0]], [0, 1, initial[1]]], np.float32)
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, iterations, eps)
     try:
@@ -126,39 +121,37 @@ def coarse_shift(reference: np.ndarray, image: np.ndarray, window: np.ndarray) -
     return shift if np.all(np.isfinite(shift)) else np.zeros(2)
 
 
+def pyramid_levels(burst: np.ndarray, max_pixels: int = PYRAMID_MAX_PIXELS) -> tuple[Level, Level]:
+    """The burst's grey frames (OpenCV luma) averaged down by ``fine`` and ``coarse``
+    (:func:`pyramid_scales`): ``((fine, fine_frames), (coarse, coarse_frames))``."""
+    h, w = burst.shape[1:3]
+    fine, coarse = pyramid_scales(h, w, max_pixels)
+    fine_frames = [_downsample(_gray_float(frame), fine) for frame in burst]
+    coarse_frames = [_downsample(frame, coarse // fine) for frame in fine_frames]
+    return (fine, fine_frames), (coarse, coarse_frames)
+
+
 def pyramid_shifts(
     burst: np.ndarray,
     smoothing: int = 7,
     iterations: int = 50,
     eps: float = 1e-4,
     max_pixels: int = PYRAMID_MAX_PIXELS,
+    levels: tuple[Level, Level] | None = None,
 ) -> np.ndarray:
     """Shifts ``(N, 2)`` float64 of each frame relative to the common frame, coarse to fine.
 
     Grey frames (OpenCV luma) are averaged down by ``fine`` and ``coarse`` (see
-    :func:`pyramid_scales`: 2 and 4 at 1024x768); OpenCV's phase correlation of the
+    :func:`pyramid_scales`: 2 and 4 at 1024x768; ``levels``: those of
+    :func:`pyramid_levels`, already made); OpenCV's phase correlation of the
     Hann-windowed ``coarse`` images gives a start within a fraction of a pixel, which
     OpenCV's ECC refines on the ``fine`` images (Gaussian ``smoothing`` px there, stop at
     ``eps`` px or ``iterations``).  No motion model: :func:`estimate_shifts` fits one.
     """
     burst = check_burst(burst)
-    return _pyramid(burst, smoothing, iterations, eps, max_pixels)[-1]
-
-
-def _pyramid(
-    burst: np.ndarray,
-    smoothing: int = 7,
-    iterations: int = 50,
-    eps: float = 1e-4,
-    max_pixels: int = PYRAMID_MAX_PIXELS,
-) -> tuple[tuple[int, list[np.ndarray]], tuple[int, list[np.ndarray]], np.ndarray]:
-    """:func:`pyramid_shifts` with the grey frames it computed on the way:
-    ``((fine, fine_frames), (coarse, coarse_frames), shifts)``."""
-    n, h, w = burst.shape[:3]
+    n = len(burst)
     middle = n // 2
-    fine, coarse = pyramid_scales(h, w, max_pixels)
-    fine_frames = [_downsample(_gray_float(frame), fine) for frame in burst]
-    coarse_frames = [_downsample(frame, coarse // fine) for frame in fine_frames]
+    (fine, fine_frames), (coarse, coarse_frames) = levels or pyramid_levels(burst, max_pixels)
     ch, cw = coarse_frames[middle].shape
     window = cv2.createHanningWindow((cw, ch), cv2.CV_32F)
     shifts = np.zeros((n, 2), np.float64)
@@ -176,7 +169,7 @@ def _pyramid(
             eps=eps,
         )
         shifts[k] = refined * fine
-    return (fine, fine_frames), (coarse, coarse_frames), shifts
+    return shifts
 
 
 def fit_linear(shifts: np.ndarray) -> np.ndarray:
@@ -255,9 +248,10 @@ def estimate_warps(burst: np.ndarray, motion: Motion = "linear", turn: bool = Tr
     if motion not in ("free", "linear"):
         raise LBurstValueError(f"unknown motion model {motion!r}: use 'free' or 'linear'")
     burst = check_burst(burst)
-    fine, coarse, shifts = _pyramid(burst)
+    levels = pyramid_levels(burst)
+    shifts = pyramid_shifts(burst, levels=levels)
     if turn:
-        warps = euclidean_warps(fine, coarse, shifts)
+        warps = euclidean_warps(*levels, shifts)
         if warps is not None:
             return warps
     return translation_warps(fit_linear(shifts) if motion == "linear" else shifts)
@@ -295,7 +289,7 @@ def align_burst(
             raise LBurstValueError(
                 f"shifts must be ({n}, 2) or warps ({n}, 2, 3) for a {n}-frame burst, got {warps.shape}"
             )
-    identity = translation_warps(np.zeros((1, 2)))[0]
+    identity = np.eye(2, 3)
     out = np.empty(burst.shape, burst.dtype)  # C order: every out[k] is a contiguous frame OpenCV writes into
     for k in range(n):
         if np.any(warps[k] != identity):

@@ -45,6 +45,17 @@ def time_offsets(n: int) -> np.ndarray:
     return np.arange(n, dtype=np.float32) - n // 2
 
 
+def inner_mask(height: int, width: int, pad: int, min_inner: int = 0) -> np.ndarray:
+    """uint8 ``(height, width)`` mask for OpenCV's ECC: 1 more than ``pad`` px from every border,
+    or everywhere where that leaves no more than ``min_inner`` px a side."""
+    mask = np.zeros((height, width), np.uint8)
+    if height > 2 * pad + min_inner and width > 2 * pad + min_inner:
+        mask[pad : height - pad, pad : width - pad] = 1
+    else:
+        mask[:] = 1
+    return mask
+
+
 def gray(frames: np.ndarray) -> np.ndarray:
     """Luma (ITU-R 601 weights, as OpenCV) of RGB ``(..., 3)`` images, float32 in the input's scale."""
     weights = np.array([0.299, 0.587, 0.114], np.float32)

@@ -1,5 +1,5 @@
 """Bursts that turn: the in-plane rotation of each frame about the common frame, on top of the
-translation of :func:`lburst.burst.align.pyramid_shifts`.
+translation of :func:`lburst.burst.align.pyramid_shifts`, on the same pyramid levels.
 
 A drone that yaws while it takes a burst (in a turn between survey lines, or in a gust) turns
 its frames against each other: at 24 degrees per second and 20 frames per second the ends of a
@@ -21,7 +21,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from lburst.burst.frames import time_offsets
+from lburst.burst.frames import inner_mask, time_offsets
 
 #: a fitted rotation that moves every corner of the frame by less than this many pixels reads as
 #: none: the networks take that much (they are trained on bursts moving up to 12 px per frame),
@@ -32,10 +32,11 @@ ROTATION_MIN_PX = 3.0
 
 def warp_matrix(angle: float, centre_shift: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """The 2x3 warp that turns by ``angle`` (radians) about ``centre`` and then moves ``centre``
-    by ``centre_shift``: ``W p = R (p - centre) + centre + centre_shift``."""
-    c, s = np.cos(angle), np.sin(angle)
-    rotation = np.array([[c, -s], [s, c]])
-    return np.hstack([rotation, (centre - rotation @ centre + centre_shift)[:, None]])
+    by ``centre_shift``: ``W p = R (p - centre) + centre + centre_shift`` (OpenCV's rotation
+    matrix, whose positive angles turn the other way in image coordinates)."""
+    warp = cv2.getRotationMatrix2D((float(centre[0]), float(centre[1])), -float(np.degrees(angle)), 1.0)
+    warp[:, 2] += centre_shift
+    return warp
 
 
 def euclidean_ecc(
@@ -49,11 +50,7 @@ def euclidean_ecc(
 ) -> tuple[float, np.ndarray | None]:
     """OpenCV's ECC with Euclidean motion from the 2x3 ``start``, ignoring ``pad`` px at the borders:
     ``(correlation, warp)``, ``(-1, None)`` where it fails."""
-    h, w = reference.shape
-    mask = np.zeros((h, w), np.uint8)
-    mask[pad : h - pad, pad : w - pad] = 1
-    if not mask.any():
-        mask[:] = 1
+    mask = inner_mask(*reference.shape, pad)
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, iterations, eps)
     try:
         rho, warp = cv2.findTransformECC(
@@ -66,11 +63,13 @@ def euclidean_ecc(
 
 #: ``(angle in radians, shift of the frame's centre in full pixels)``
 Turn = tuple[float, np.ndarray]
+#: one level of :func:`lburst.burst.align.pyramid_levels`: ``(factor, grey frames downsampled by it)``
+Level = tuple[int, list[np.ndarray]]
 
 
 def euclidean_warps(
-    fine: tuple[int, list[np.ndarray]],
-    coarse: tuple[int, list[np.ndarray]],
+    fine: Level,
+    coarse: Level,
     shifts: np.ndarray,
     smoothing: int = 7,
     iterations: int = 50,
@@ -79,19 +78,18 @@ def euclidean_warps(
 ) -> np.ndarray | None:
     """Warps ``(N, 2, 3)`` float64 in full-resolution pixels, or ``None`` for a burst that does not turn.
 
-        The end frames are first turned against the common frame on the ``coarse`` level (a quarter
-        of the pixels or fewer), from no motion and from their ``shifts``; only if one of them turns
-        are all frames fitted on the ``fine`` level, each from its share of the ends' turn and from
-        its shift, keeping the fit of higher correlation (phase correlation, which gives the shifts,
-        can fail on a turning frame).  Each frame keeps its own fit, with no motion model: a turn starts
-    and ends within a burst (the ECC fits of a 640x480 moonless burst differ from a steady turn by
-    about 0.05 degrees).
+    The end frames are first turned against the common frame on the ``coarse`` level (a quarter
+    of the pixels or fewer), from no motion and from their ``shifts``; only if one of them turns
+    are all frames fitted on the ``fine`` level, each from its share of the ends' turn and from
+    its shift, keeping the fit of higher correlation (phase correlation, which gives the shifts,
+    can fail on a turning frame).  Each frame keeps its own fit, with no motion model: a turn
+    starts and ends within a burst (the ECC fits of a 640x480 moonless burst differ from a
+    steady turn by about 0.05 degrees).
 
-        Args:
-            fine, coarse: ``(factor, grey frames downsampled by it)`` of the burst, as
-                :func:`lburst.burst.align.pyramid_shifts` makes them (pixel ``i`` covers full pixels
-                ``factor * i .. factor * i + factor - 1``).
-            shifts: ``(N, 2)`` full-resolution translations.
+    Args:
+        fine, coarse: the burst's levels (:func:`lburst.burst.align.pyramid_levels`; pixel ``i``
+            of a level covers full pixels ``factor * i .. factor * i + factor - 1``).
+        shifts: ``(N, 2)`` full-resolution translations.
     """
     n = len(shifts)
     middle = n // 2
@@ -99,7 +97,7 @@ def euclidean_warps(
     half_diagonal = fine[0] * np.hypot(w, h) / 2.0
     shifts = np.asarray(shifts, np.float64)
 
-    def fit(level: tuple[int, list[np.ndarray]], k: int, starts: list[Turn]) -> Turn:
+    def fit(level: Level, k: int, starts: list[Turn]) -> Turn:
         factor, frames = level
         lh, lw = frames[middle].shape
         centre = np.array([(lw - 1) / 2.0, (lh - 1) / 2.0])
@@ -125,9 +123,10 @@ def euclidean_warps(
     centre_shifts = np.zeros((n, 2))
     for k in range(n):
         if k != middle:
-            end = ends[0] if t[k] < 0 else ends[n - 1]
-            share = t[k] / t[0 if t[k] < 0 else n - 1]
-            angles[k], centre_shifts[k] = fit(fine, k, [(end[0] * share, end[1] * share), (0.0, shifts[k])])
+            end = 0 if t[k] < 0 else n - 1
+            share = t[k] / t[end]
+            start = (ends[end][0] * share, ends[end][1] * share)
+            angles[k], centre_shifts[k] = fit(fine, k, [start, (0.0, shifts[k])])
     if np.abs(angles).max() * half_diagonal < ROTATION_MIN_PX:
         return None
     offset = (fine[0] - 1) / 2.0  # full pixel = factor * level pixel + (factor - 1) / 2
