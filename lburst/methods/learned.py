@@ -62,6 +62,7 @@ class LearnedOptions:
     fast: bool = MultiScaleConfig.fast
     precision: str = MultiScaleConfig.precision
     whiten: bool = MultiScaleConfig.whiten
+    pad: int | None = MultiScaleConfig.pad
     rotations: int = 1
     spread: int = 0
 
@@ -93,6 +94,7 @@ class LearnedOptions:
                 "fast",
                 "precision",
                 "whiten",
+                "pad",
             )
         }
 

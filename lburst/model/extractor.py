@@ -27,12 +27,15 @@ from lburst.features import Features, concatenate, image_size, select
 from lburst.model.fast import FastLBurstNet, descriptor_stride, descriptors_at
 from lburst.model.lite import LiteNet
 from lburst.model.network import (
+    MAX_PAD,
     WHITENING_KEYS,
+    CheckpointError,
     LBurstNet,
     autocast_dtype,
     check_device,
     check_float_burst,
     check_precision,
+    default_pad,
     load_checkpoint,
     normalize_burst,
 )
@@ -63,6 +66,13 @@ class MultiScaleConfig:
             (autocast; heads stay fp32): faster where the hardware has it, not identical.
         whiten: return whitened descriptors (the weights' ``descriptor_whitening``,
             :mod:`lburst.train.whitening`): more mutual matches, a lower share of them correct.
+        pad: pixels of reflected image added around each pyramid level before the network
+            runs; keypoints are kept inside the level.  ``None``: the weights' own
+            (:attr:`LBurst.pad`: :data:`lburst.model.network.OWN_WEIGHTS_PAD` for lburst's
+            weights, 0 for published ones, which are run as published).  Without it the
+            network sees each level's border as zero padding, which lburst's weights learnt to
+            give a low reliability, so their keypoints avoid the outer 16 px and a refined
+            camera's distortion is fitted from the image centre (docs/results.md).
     """
 
     min_size: int = 256
@@ -77,6 +87,7 @@ class MultiScaleConfig:
     fast: bool = True
     precision: str = "fp32"
     whiten: bool = False
+    pad: int | None = None
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field for any value outside its range (every use of
@@ -106,6 +117,8 @@ class MultiScaleConfig:
             value = getattr(self, name)
             if not _is_real(value) or not 0 <= value <= 1:
                 raise LBurstValueError(f"{name} must be in [0, 1], got {value!r}")
+        if self.pad is not None and (not _is_int(self.pad) or not 0 <= self.pad <= MAX_PAD):
+            raise LBurstValueError(f"pad must be an integer 0-{MAX_PAD} (pixels), got {self.pad!r}")
         if self.top_k is not None and (not _is_int(self.top_k) or self.top_k < 0):
             raise LBurstValueError(f"top_k must be an integer >= 0 or None, got {self.top_k!r}")
         for name in ("published_coordinates", "fast", "whiten"):
@@ -151,13 +164,25 @@ def frame_permutation(n: int, order: str) -> list[int]:
     raise LBurstValueError(f"unknown frame order {order!r}: use 'temporal' or 'published'")
 
 
-def _local_maxima(rep: torch.Tensor, rel: torch.Tensor, cfg: MultiScaleConfig) -> tuple[torch.Tensor, torch.Tensor]:
-    """(y, x) of 3x3 local maxima of ``rep`` (1,1,h,w) passing both thresholds."""
+def _local_maxima(
+    rep: torch.Tensor, rel: torch.Tensor, cfg: MultiScaleConfig, pad: int = 0
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(y, x) of 3x3 local maxima of ``rep`` (1,1,h,w) passing both thresholds, at least
+    ``pad`` pixels inside every border."""
     maxima = rep == F.max_pool2d(rep, kernel_size=3, stride=1, padding=1)
     maxima &= rep >= cfg.rep_thr
     maxima &= rel >= cfg.rel_thr
+    if pad:
+        inner = torch.zeros_like(maxima)
+        inner[..., pad:-pad, pad:-pad] = True
+        maxima &= inner
     yx = maxima[0, 0].nonzero()
     return yx[:, 0], yx[:, 1]
+
+
+def _layout(x: torch.Tensor) -> torch.memory_format:
+    """The memory format ``x`` is in (channels-last or contiguous)."""
+    return torch.channels_last if x.is_contiguous(memory_format=torch.channels_last) else torch.contiguous_format
 
 
 def _kth_best(scores: list[torch.Tensor], k: int | None) -> float:
@@ -264,6 +289,7 @@ class LBurst:
         align: bool = False,
         descriptor_mean: np.ndarray | None = None,
         descriptor_whitening: np.ndarray | None = None,
+        pad: int = 0,
     ) -> None:
         """``net``: the network; or ``runner`` (with ``frames``): any callable with the
         signature of :meth:`lburst.model.fast.FastLBurstNet.forward`, e.g. an ONNX Runtime session.
@@ -274,10 +300,13 @@ class LBurst:
         ``descriptor_mean`` (D,) and ``descriptor_whitening`` (D, D): the weights' descriptor
         whitening (checkpoint ``meta``, :mod:`lburst.train.whitening`); with ``whiten=True``
         descriptors are returned as ``normalize(W (d - mean))`` (``W`` the identity when not
-        given)."""
+        given).  ``pad``: the reflected border each pyramid level gets unless the call says
+        otherwise (:class:`MultiScaleConfig`; :meth:`from_checkpoint` takes it from the weights,
+        :func:`default_pad`)."""
         if net is None and runner is None:
             raise LBurstValueError("give a network or a runner")
         self._device = check_device(device)
+        self.pad = MultiScaleConfig(pad=pad).pad or 0  # checked as the config checks it; None: none
         self.net = net.eval().to(self.device) if net is not None else None
         self.frames = net.config.frames if net is not None else int(frames)
         self.frame_order = frame_order
@@ -382,6 +411,7 @@ class LBurst:
             frames=runner.frames,
             align=runner.meta["input"] == "aligned",
             **{key: runner.meta.get(key) for key in WHITENING_KEYS},
+            pad=runner.meta.get("pad", 0),
         )
 
     @classmethod
@@ -406,6 +436,10 @@ class LBurst:
         meta = extra.get("meta") if isinstance(extra.get("meta"), dict) else {}
         if align is None:
             align = meta.get("input") == "aligned"
+        try:
+            pad = default_pad(meta)
+        except ValueError as exc:
+            raise CheckpointError(f"{path}: {exc}") from None
         threads = threads or torch.get_num_threads()
         if runtime is None:
             runtime = "auto" if isinstance(net, LiteNet) and device.type == "cpu" else "torch"
@@ -421,6 +455,7 @@ class LBurst:
             runner=runner,
             align=align,
             **{key: meta.get(key) for key in WHITENING_KEYS},
+            pad=pad,
         )
         model.runtime = runtime
         return model
@@ -497,8 +532,8 @@ class LBurst:
         return np.stack(frames), s
 
     @torch.inference_mode()
-    def dense(self, burst: np.ndarray | torch.Tensor, whiten: bool = False) -> Features:
-        """Dense outputs at the input's resolution (``whiten``: as :class:`MultiScaleConfig`;
+    def dense(self, burst: np.ndarray | torch.Tensor, whiten: bool = False, pad: int | None = None) -> Features:
+        """Dense outputs at the input's resolution (``whiten``, ``pad``: as :class:`MultiScaleConfig`;
         ``burst``: one burst, NumPy or torch, as :meth:`extract` takes it).
 
         Returns ``descriptors`` (H, W, D), ``repeatability`` (H, W) and
@@ -515,13 +550,15 @@ class LBurst:
                 f"this machine's memory ({limit / 2**30:.1f} GiB): use extract(), or resize the burst"
             )
         x, _ = self._input(burst)
-        rep, rel, half = self.fast_net(x)
-        stride = descriptor_stride(half.shape[-1], x.shape[-1])
+        h, w = x.shape[-2:]
+        xp, pad = self._reflect(x, MultiScaleConfig(pad=pad).pad)
+        rep, rel, half = self.fast_net(xp)
+        rep, rel = rep[..., pad : pad + h, pad : pad + w], rel[..., pad : pad + h, pad : pad + w]
+        stride = descriptor_stride(half.shape[-1], xp.shape[-1])
         desc = F.interpolate(half, scale_factor=float(stride), mode="bilinear", align_corners=False)
-        desc = F.normalize(desc[..., : x.shape[-2], : x.shape[-1]], dim=1)
+        desc = F.normalize(desc[..., pad : pad + h, pad : pad + w], dim=1)
         if whiten:
             desc = self._whiten(desc, dim=1)
-        h, w = x.shape[-2:]
         desc = F.pad(desc, (0, w - desc.shape[-1], 0, h - desc.shape[-2]), mode="replicate")
         return {
             "descriptors": desc[0].permute(1, 2, 0).float().cpu().numpy(),
@@ -616,6 +653,14 @@ class LBurst:
         found = self._extract(x, cfg, sizes.pop(), inputs[0][1])
         return found if isinstance(found, list) else [found]
 
+    def _reflect(self, x: torch.Tensor, pad: int | None) -> tuple[torch.Tensor, int]:
+        """``x`` with ``pad`` pixels (``None``: :attr:`pad`) of reflected image on every side, at
+        most one less than its shorter side (what reflection allows), and that pad."""
+        pad = min(self.pad if pad is None else pad, x.shape[-2] - 1, x.shape[-1] - 1)
+        if not pad:
+            return x, 0
+        return F.pad(x, (pad,) * 4, mode="reflect").contiguous(memory_format=_layout(x)), pad
+
     @staticmethod
     def _full_size(burst) -> tuple[int, int]:
         """(height, width) of a burst (N, H, W, 3) or an image (H, W, 3)."""
@@ -648,14 +693,15 @@ class LBurst:
         while s + 0.001 >= lowest:
             if s - 0.001 <= min(cfg.max_scale, cfg.max_size / long_side):
                 h, w = x.shape[-2:]
+                xp, pad = self._reflect(x, cfg.pad)
                 if cfg.fast or self.net is None:
-                    rep, rel, half = self._fast_level(x, cfg.precision)
-                    stride = descriptor_stride(half.shape[-1], w)
+                    rep, rel, half = self._fast_level(xp, cfg.precision)
+                    stride = descriptor_stride(half.shape[-1], xp.shape[-1])
                 else:
-                    out = self.net(x)
+                    out = self.net(xp)
                     rep, rel = out["repeatability"], out["reliability"]
                 for b in range(batch):
-                    y, xx = _local_maxima(rep[b : b + 1], rel[b : b + 1], cfg)
+                    y, xx = _local_maxima(rep[b : b + 1], rel[b : b + 1], cfg, pad)
                     score = rep[b, 0, y, xx] * rel[b, 0, y, xx]
                     keep = score >= _kth_best([score] + [level[3] for level in found[b]], cfg.top_k)
                     y, xx, score = y[keep], xx[keep], score[keep]
@@ -663,6 +709,7 @@ class LBurst:
                         desc = descriptors_at(half[b : b + 1], y, xx, stride)
                     else:
                         desc = out["descriptors"][b, :, y, xx].t()
+                    y, xx = y - pad, xx - pad
                     if cfg.published_coordinates:
                         px, py = xx.float() * width / w, y.float() * height / h
                     else:

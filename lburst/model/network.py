@@ -244,6 +244,23 @@ def config_from_net_string(net: str) -> NetConfig:
 #: (:mod:`lburst.train.whitening`).
 WHITENING_KEYS = ("descriptor_mean", "descriptor_whitening")
 
+MAX_PAD = 256  # pixels of reflected border around a pyramid level (MultiScaleConfig.pad)
+#: The reflected border lburst's own weights are run with: they learnt a low reliability within
+#: 16 px of a zero-padded border (docs/results.md, "What in our keypoints costs pose accuracy").
+OWN_WEIGHTS_PAD = 32
+
+
+def default_pad(meta: dict | None) -> int:
+    """The reflected border weights are run with: ``meta['pad']`` where given, else
+    :data:`OWN_WEIGHTS_PAD` for lburst's own weights (they carry a ``meta``) and 0 for
+    published ones, which are run as published."""
+    if not meta:
+        return 0
+    pad = meta.get("pad", OWN_WEIGHTS_PAD)
+    if isinstance(pad, bool) or not isinstance(pad, (int, np.integer)) or not 0 <= pad <= MAX_PAD:
+        raise LBurstValueError(f"the weights' pad must be an integer 0-{MAX_PAD}, got {pad!r}")
+    return int(pad)
+
 
 def network_from_net_string(net: str) -> LBurstNet | LiteNet:
     """An untrained network of the architecture a checkpoint's ``net`` string names:

@@ -27,7 +27,7 @@ from lburst.burst.io import atomic_path
 from lburst.extras import require
 from lburst.model.fast import CoreModule, FastLBurstNet, pad_maps
 from lburst.model.lite import LiteNet
-from lburst.model.network import WHITENING_KEYS, CheckpointError, LBurstNet, load_checkpoint
+from lburst.model.network import WHITENING_KEYS, CheckpointError, LBurstNet, default_pad, load_checkpoint
 
 #: names of the exported graph's input and outputs
 INPUT_NAME = "burst"
@@ -90,8 +90,9 @@ def _store_meta(path: Path, meta: dict) -> None:
 
 def meta_props(meta: dict) -> dict[str, str]:
     """A checkpoint's ``meta`` as the ``lburst.*`` strings kept beside an exported graph:
-    ``lburst.input`` (``'burst'`` or ``'aligned'``) and the descriptor whitening as JSON."""
-    entries = {"lburst.input": str(meta.get("input", "burst"))}
+    ``lburst.input`` (``'burst'`` or ``'aligned'``), ``lburst.pad`` (:func:`default_pad`) and
+    the descriptor whitening as JSON."""
+    entries = {"lburst.input": str(meta.get("input", "burst")), "lburst.pad": str(default_pad(meta))}
     for key in WHITENING_KEYS:
         if meta.get(key) is not None:
             entries[f"lburst.{key}"] = json.dumps(np.asarray(meta[key], np.float32).tolist())
@@ -100,11 +101,12 @@ def meta_props(meta: dict) -> dict[str, str]:
 
 def parse_meta(props: dict[str, str], path: str | Path) -> dict:
     """What :func:`_store_meta` kept (``lburst.*`` entries of ``props``): ``{'input': 'burst' or
-    'aligned', 'descriptor_mean'?, 'descriptor_whitening'?}``; :class:`CheckpointError` naming
-    ``path`` when unreadable."""
+    'aligned', 'pad' (0 for an export without it), 'descriptor_mean'?, 'descriptor_whitening'?}``;
+    :class:`CheckpointError` naming ``path`` when unreadable."""
     try:
         return {
             "input": props.get("lburst.input", "burst"),
+            "pad": default_pad({"pad": int(props.get("lburst.pad", "0"))}),
             **{
                 k: np.asarray(json.loads(props[f"lburst.{k}"]), np.float32)
                 for k in WHITENING_KEYS
