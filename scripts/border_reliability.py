@@ -5,7 +5,9 @@ For each network (a checkpoint or a shipped name) and each burst, the dense maps
 (0-8, 8-16, 16-32, 32-64 and over 64 px); the table gives, per ring, the mean reliability
 and the share of pixels where both maps pass the 0.7 keypoint thresholds, averaged over the
 bursts.  A network whose reliability falls at the border puts few keypoints there, and COLMAP
-then fits the lens distortion from the image centre alone.
+then fits the lens distortion from the image centre alone.  ``--pad N`` runs every network with
+N px of reflected image around the burst (default: each network's own, 32 for lburst's
+weights and 0 for published ones; :class:`lburst.model.extractor.MultiScaleConfig`).
 
     python scripts/border_reliability.py lburst-b5 $S/anchors/RoBLo_N16_B5.pt \
         --bursts outputs/scenes/lund_g100/0[1-4] --out outputs/border.json
@@ -48,6 +50,7 @@ def main() -> None:
     p.add_argument("networks", nargs="+", help="checkpoints (.pt) or shipped names")
     p.add_argument("--bursts", nargs="+", required=True, help="burst folders")
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--pad", type=int, help="reflected border in px (default: each network's own)")
     p.add_argument("--out", type=Path, help="also write the table as JSON")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
@@ -56,9 +59,9 @@ def main() -> None:
         model = load(spec)
         per_burst = []
         for folder in args.bursts:
-            maps = model.dense(load_burst(folder))
+            maps = model.dense(load_burst(folder), pad=args.pad)
             per_burst.append(ring_statistics(maps["repeatability"], maps["reliability"]))
-        table[spec] = np.mean(per_burst, axis=0).tolist()
+        table[spec if args.pad is None else f"{spec}, pad {args.pad}"] = np.mean(per_burst, axis=0).tolist()
     names = [f"{lo}-{hi}" if hi else f"{lo}+" for lo, hi in RINGS]
     print("| network | " + " | ".join(f"{n} px: rel / detectable" for n in names) + " |")
     print("|---|" + "---|" * len(names))
