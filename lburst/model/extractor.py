@@ -437,7 +437,7 @@ class LBurst:
         if align is None:
             align = meta.get("input") == "aligned"
         try:
-            pad = default_pad(meta)
+            pad = default_pad(meta, net)
         except ValueError as exc:
             raise CheckpointError(f"{path}: {exc}") from None
         threads = threads or torch.get_num_threads()

@@ -7,6 +7,7 @@ import pytest
 
 from lburst import simulate_burst
 from lburst.model.extractor import LBurst, MultiScaleConfig
+from lburst.model.lite import LiteConfig, LiteNet
 from lburst.model.network import (
     OWN_WEIGHTS_PAD,
     CheckpointError,
@@ -24,12 +25,16 @@ BORDER = 12  # px: "near the border"
 
 def test_the_weights_say_their_pad(tmp_path):
     assert LBurst.pretrained("lburst-b5", device="cpu").pad == OWN_WEIGHTS_PAD
+    assert LBurst.pretrained("lburst-b5-lite", device="cpu").pad == 0  # not shown to pay there
+    assert LBurst.pretrained("lburst-b1", device="cpu").pad == 0
     net = LBurstNet(NetConfig(frames=1))
     save_checkpoint(net, tmp_path / "own.pt", meta={"pad": 8})
     assert LBurst.from_checkpoint(tmp_path / "own.pt", device="cpu").pad == 8
     save_checkpoint(net, tmp_path / "published.pt")  # the published layout: no meta
     assert LBurst.from_checkpoint(tmp_path / "published.pt", device="cpu").pad == 0  # run as published
-    assert default_pad(None) == 0 and default_pad({"input": "aligned"}) == OWN_WEIGHTS_PAD
+    assert default_pad(None, LBurstNet(NetConfig(frames=5))) == 0  # published: no meta
+    assert default_pad({"input": "aligned"}, LBurstNet(NetConfig(frames=5))) == OWN_WEIGHTS_PAD
+    assert default_pad({"input": "aligned"}, LiteNet(LiteConfig(frames=5))) == 0
     save_checkpoint(net, tmp_path / "bad.pt", meta={"pad": -3})
     with pytest.raises(CheckpointError, match=r"bad\.pt: the weights' pad must be an integer"):
         LBurst.from_checkpoint(tmp_path / "bad.pt", device="cpu")

@@ -13,7 +13,7 @@ from lburst.extras import MissingExtra
 from lburst.model import runtimes as rt
 from lburst.model.extractor import LBurst
 from lburst.model.lite import LiteConfig, LiteNet
-from lburst.model.network import OWN_WEIGHTS_PAD, save_checkpoint
+from lburst.model.network import save_checkpoint
 from lburst.model.runtimes import inference_form
 
 SMALL = LiteConfig(frames=3, dim=16, fine=8, coarse=16, dilations=(1, 2))
@@ -66,9 +66,10 @@ def test_onnx_export_of_the_light_net_matches_torch(net, exported, size):
 def test_onnx_light_model_extracts_through_lburst(net, exported):
     burst = np.random.default_rng(0).integers(0, 256, (3, 70, 90, 3), dtype=np.uint8)
     model = LBurst.from_onnx(exported)
-    assert model.align and model.pad == OWN_WEIGHTS_PAD  # the checkpoint's meta travels with the graph
+    assert model.align  # the checkpoint's meta travels with the graph
+    assert model.pad == 0  # the light network runs without the reflected border
     model.align = False
-    got, ref = model.dense(burst), LBurst(net, pad=OWN_WEIGHTS_PAD).dense(burst)
+    got, ref = model.dense(burst), LBurst(net).dense(burst)
     for key in ref:
         np.testing.assert_allclose(got[key], ref[key], atol=1e-4)
 
