@@ -101,9 +101,8 @@ def _default_options(spec: str) -> dict[str, str]:
 
 #: the revision of the code that turns a burst into features, raised when it changes what a
 #: method returns for the same burst and weights, so that no stored file of the old code is
-#: served (2: bursts that turn are aligned with their rotation, :mod:`lburst.burst.turning`; 3: lburst's
-#: weights see each pyramid level with a reflected border, :data:`lburst.model.network.OWN_WEIGHTS_PAD`)
-REVISION = 3
+#: served (2: bursts that turn are aligned with their rotation, :mod:`lburst.burst.turning`)
+REVISION = 2
 
 
 def method_key(spec: str, **options: Any) -> dict[str, Any]:

@@ -68,11 +68,12 @@ class MultiScaleConfig:
             :mod:`lburst.train.whitening`): more mutual matches, a lower share of them correct.
         pad: pixels of reflected image added around each pyramid level before the network
             runs; keypoints are kept inside the level.  ``None``: the weights' own
-            (:attr:`LBurst.pad`: :data:`lburst.model.network.OWN_WEIGHTS_PAD` for lburst's
-            weights, 0 for published ones, which are run as published).  Without it the
-            network sees each level's border as zero padding, which lburst's weights learnt to
-            give a low reliability, so their keypoints avoid the outer 16 px and a refined
-            camera's distortion is fitted from the image centre (docs/results.md).
+            (:attr:`LBurst.pad`, their ``meta['pad']``; 0 for every shipped and published
+            weights).  Without it the network sees each level's border as zero padding, to
+            which lburst's weights learnt to give a low reliability, so their keypoints avoid
+            the outer 16 px; with 32 px they cover it as the published model does, at a
+            fifth more time and mixed results in 3D (docs/results.md, "A reflected border at
+            extraction").
     """
 
     min_size: int = 256
@@ -437,7 +438,7 @@ class LBurst:
         if align is None:
             align = meta.get("input") == "aligned"
         try:
-            pad = default_pad(meta, net)
+            pad = default_pad(meta)
         except ValueError as exc:
             raise CheckpointError(f"{path}: {exc}") from None
         threads = threads or torch.get_num_threads()

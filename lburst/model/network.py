@@ -245,22 +245,13 @@ def config_from_net_string(net: str) -> NetConfig:
 WHITENING_KEYS = ("descriptor_mean", "descriptor_whitening")
 
 MAX_PAD = 256  # pixels of reflected border around a pyramid level (MultiScaleConfig.pad)
-#: The reflected border lburst's burst Fast-Quad-L2-Net weights (lburst-b5) are run with: they
-#: learnt a low reliability within 16 px of a zero-padded border (docs/results.md, "What in our
-#: keypoints costs pose accuracy").
-OWN_WEIGHTS_PAD = 32
 
 
-def default_pad(meta: dict | None, net: nn.Module | None = None) -> int:
-    """The reflected border weights are run with: ``meta['pad']`` where given; else
-    :data:`OWN_WEIGHTS_PAD` for lburst's own (they carry a ``meta``) burst Fast-Quad-L2-Net
-    (``net``: an :class:`LBurstNet` of more than one frame), and 0 for the rest: published
-    weights, run as published, and the light and single-image networks, where the border was
-    not shown to pay (on Oxford at σ 50 it cost the light network 0.013 MMA@3)."""
-    if not meta:
-        return 0
-    burst_net = isinstance(net, LBurstNet) and net.config.frames > 1
-    pad = meta.get("pad", OWN_WEIGHTS_PAD if burst_net else 0)
+def default_pad(meta: dict | None) -> int:
+    """The reflected border (px) weights ask to be run with, ``meta['pad']``; 0 when they do
+    not say (published weights, and lburst's shipped ones: docs/results.md, "A reflected
+    border at extraction")."""
+    pad = (meta or {}).get("pad", 0)
     if isinstance(pad, bool) or not isinstance(pad, (int, np.integer)) or not 0 <= pad <= MAX_PAD:
         raise LBurstValueError(f"the weights' pad must be an integer 0-{MAX_PAD}, got {pad!r}")
     return int(pad)

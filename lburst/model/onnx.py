@@ -72,27 +72,27 @@ def export_network_onnx(net: LBurstNet | LiteNet, out: str | Path, meta: dict | 
             external_data=False,
             verbose=False,
         )
-        _store_meta(tmp, meta or {}, net)
+        _store_meta(tmp, meta or {})
     return out
 
 
-def _store_meta(path: Path, meta: dict, net: LBurstNet | LiteNet) -> None:
+def _store_meta(path: Path, meta: dict) -> None:
     """Keep what extraction needs beside the graph (``metadata_props``): the weights' input
     (``aligned`` bursts or not) and their descriptor whitening."""
     import onnx
 
     model = onnx.load(str(path))
-    for key, value in meta_props(meta, net).items():
+    for key, value in meta_props(meta).items():
         entry = model.metadata_props.add()
         entry.key, entry.value = key, value
     onnx.save(model, str(path))
 
 
-def meta_props(meta: dict, net: LBurstNet | LiteNet | None = None) -> dict[str, str]:
+def meta_props(meta: dict) -> dict[str, str]:
     """A checkpoint's ``meta`` as the ``lburst.*`` strings kept beside an exported graph:
-    ``lburst.input`` (``'burst'`` or ``'aligned'``), ``lburst.pad`` (:func:`default_pad` of ``net``) and
+    ``lburst.input`` (``'burst'`` or ``'aligned'``), ``lburst.pad`` (:func:`default_pad`) and
     the descriptor whitening as JSON."""
-    entries = {"lburst.input": str(meta.get("input", "burst")), "lburst.pad": str(default_pad(meta, net))}
+    entries = {"lburst.input": str(meta.get("input", "burst")), "lburst.pad": str(default_pad(meta))}
     for key in WHITENING_KEYS:
         if meta.get(key) is not None:
             entries[f"lburst.{key}"] = json.dumps(np.asarray(meta[key], np.float32).tolist())

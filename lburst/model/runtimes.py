@@ -213,7 +213,7 @@ def openvino_model(source: str | Path | LBurstNet | LiteNet, meta: dict | None =
     model.inputs[0].get_tensor().set_names({INPUT_NAME})
     for output, name in zip(model.outputs, OUTPUT_NAMES):
         output.get_tensor().set_names({name})
-    for key, value in meta_props(meta or {}, source).items():
+    for key, value in meta_props(meta or {}).items():
         model.set_rt_info(value, ["framework", key])
     return model
 

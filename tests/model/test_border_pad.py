@@ -1,43 +1,41 @@
-"""The reflected border around each pyramid level (``MultiScaleConfig.pad``): lburst's weights
-are run with it, published ones without, and the keypoints it adds near the image border are
-real ones, found again where the same scene lies inside another view."""
+"""The reflected border around each pyramid level (``MultiScaleConfig.pad``): off unless the
+weights (``meta['pad']``) or the call ask for it, carried by ONNX exports, and the keypoints it
+adds near the image border are real ones, found again where the same scene lies inside
+another view."""
 
 import numpy as np
 import pytest
 
 from lburst import simulate_burst
 from lburst.model.extractor import LBurst, MultiScaleConfig
-from lburst.model.lite import LiteConfig, LiteNet
-from lburst.model.network import (
-    OWN_WEIGHTS_PAD,
-    CheckpointError,
-    LBurstNet,
-    NetConfig,
-    default_pad,
-    save_checkpoint,
-)
+from lburst.model.network import CheckpointError, LBurstNet, NetConfig, default_pad, save_checkpoint
 from lburst.scenes.textures import load_photo
 from lburst.weights import weights_path
 
+PAD = 32
 SHIFT = 24  # px between the two views of the scene
 BORDER = 12  # px: "near the border"
 
 
 def test_the_weights_say_their_pad(tmp_path):
-    assert LBurst.pretrained("lburst-b5", device="cpu").pad == OWN_WEIGHTS_PAD
-    assert LBurst.pretrained("lburst-b5-lite", device="cpu").pad == 0  # not shown to pay there
-    assert LBurst.pretrained("lburst-b1", device="cpu").pad == 0
+    for name in ("lburst-b5", "lburst-b5-lite", "lburst-b1"):
+        assert LBurst.pretrained(name, device="cpu").pad == 0  # shipped weights run without it
     net = LBurstNet(NetConfig(frames=1))
-    save_checkpoint(net, tmp_path / "own.pt", meta={"pad": 8})
+    save_checkpoint(net, tmp_path / "own.pt", meta={"input": "burst", "pad": 8})
     assert LBurst.from_checkpoint(tmp_path / "own.pt", device="cpu").pad == 8
-    save_checkpoint(net, tmp_path / "published.pt")  # the published layout: no meta
-    assert LBurst.from_checkpoint(tmp_path / "published.pt", device="cpu").pad == 0  # run as published
-    assert default_pad(None, LBurstNet(NetConfig(frames=5))) == 0  # published: no meta
-    assert default_pad({"input": "aligned"}, LBurstNet(NetConfig(frames=5))) == OWN_WEIGHTS_PAD
-    assert default_pad({"input": "aligned"}, LiteNet(LiteConfig(frames=5))) == 0
+    assert default_pad(None) == 0 and default_pad({"input": "aligned"}) == 0
     save_checkpoint(net, tmp_path / "bad.pt", meta={"pad": -3})
     with pytest.raises(CheckpointError, match=r"bad\.pt: the weights' pad must be an integer"):
         LBurst.from_checkpoint(tmp_path / "bad.pt", device="cpu")
+
+
+def test_an_onnx_export_keeps_the_pad(tmp_path):
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("onnxscript")
+    from lburst.model.onnx import export_onnx
+
+    save_checkpoint(LBurstNet(NetConfig(frames=1)), tmp_path / "w.pt", meta={"input": "burst", "pad": 8})
+    assert LBurst.from_onnx(export_onnx(tmp_path / "w.pt", tmp_path / "w.onnx")).pad == 8
 
 
 @pytest.mark.parametrize("pad", [-1, 257, 2.5, True, "8"])
@@ -49,7 +47,7 @@ def test_a_bad_pad_is_refused_by_name(pad):
 
 
 def test_an_image_smaller_than_the_pad_is_reflected_as_far_as_it_goes():
-    model = LBurst(LBurstNet(NetConfig(frames=1)), pad=OWN_WEIGHTS_PAD)
+    model = LBurst(LBurstNet(NetConfig(frames=1)), pad=PAD)
     image = np.random.default_rng(0).integers(0, 256, (20, 24, 3), dtype=np.uint8)
     maps = model.dense(image)
     assert maps["reliability"].shape == (20, 24) and maps["descriptors"].shape == (20, 24, 128)
@@ -84,9 +82,9 @@ def test_keypoints_at_the_border_are_found_again_inside_another_view(views):
     keypoints there, and most of them again where the same scene lies inside the second view."""
     model = LBurst.from_checkpoint(weights_path("lburst-b5"), device="cpu")
     right, left = views  # `left` starts SHIFT px right of `right`: its left border lies inside `right`
-    with_pad = model.extract(left, top_k=None, min_size=256, max_size=384)
-    without = model.extract(left, top_k=None, min_size=256, max_size=384, pad=0)
-    inside = model.extract(right, top_k=None, min_size=256, max_size=384)
+    with_pad = model.extract(left, top_k=None, min_size=256, max_size=384, pad=PAD)
+    without = model.extract(left, top_k=None, min_size=256, max_size=384)
+    inside = model.extract(right, top_k=None, min_size=256, max_size=384, pad=PAD)
     border_pad, border_none = _near_left(with_pad), _near_left(without)
     assert len(border_pad) >= 1.5 * len(border_none)  # 25 against 11 when written
     assert _found_again(border_pad, inside, -SHIFT) >= 0.6  # 0.76 (without the pad: 0.55 of 11)
