@@ -71,9 +71,9 @@ class MultiScaleConfig:
             (:attr:`LBurst.pad`, their ``meta['pad']``; 0 for every shipped and published
             weights).  Without it the network sees each level's border as zero padding, to
             which lburst's weights learnt to give a low reliability, so their keypoints avoid
-            the outer 16 px; with 32 px they cover it as the published model does, at a
-            fifth more time and mixed results in 3D (docs/results.md, "A reflected border at
-            extraction").
+            the outer 16 px; with 32 px they cover it as the published model does, at about
+            15 % more time and with mixed results in 3D (docs/results.md, "A reflected border
+            at extraction").
     """
 
     min_size: int = 256
