@@ -6,8 +6,8 @@ For each network (a checkpoint or a shipped name) and each burst, the dense maps
 and the share of pixels where both maps pass the 0.7 keypoint thresholds, averaged over the
 bursts.  A network whose reliability falls at the border puts few keypoints there, and COLMAP
 then fits the lens distortion from the image centre alone.  ``--pad N`` runs every network with
-N px of reflected image around the burst (default: each network's own, 32 for lburst's
-weights and 0 for published ones; :class:`lburst.model.extractor.MultiScaleConfig`).
+N px of reflected image around the burst (default: each network's own ``meta['pad']``, 0 for
+the shipped and the published weights; :class:`lburst.model.extractor.MultiScaleConfig`).
 
     python scripts/border_reliability.py lburst-b5 $S/anchors/RoBLo_N16_B5.pt \
         --bursts outputs/scenes/lund_g100/0[1-4] --out outputs/border.json

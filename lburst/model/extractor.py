@@ -27,13 +27,13 @@ from lburst.features import Features, concatenate, image_size, select
 from lburst.model.fast import FastLBurstNet, descriptor_stride, descriptors_at
 from lburst.model.lite import LiteNet
 from lburst.model.network import (
-    MAX_PAD,
     WHITENING_KEYS,
     CheckpointError,
     LBurstNet,
     autocast_dtype,
     check_device,
     check_float_burst,
+    check_pad,
     check_precision,
     default_pad,
     load_checkpoint,
@@ -118,8 +118,8 @@ class MultiScaleConfig:
             value = getattr(self, name)
             if not _is_real(value) or not 0 <= value <= 1:
                 raise LBurstValueError(f"{name} must be in [0, 1], got {value!r}")
-        if self.pad is not None and (not _is_int(self.pad) or not 0 <= self.pad <= MAX_PAD):
-            raise LBurstValueError(f"pad must be an integer 0-{MAX_PAD} (pixels), got {self.pad!r}")
+        if self.pad is not None:
+            check_pad(self.pad)
         if self.top_k is not None and (not _is_int(self.top_k) or self.top_k < 0):
             raise LBurstValueError(f"top_k must be an integer >= 0 or None, got {self.top_k!r}")
         for name in ("published_coordinates", "fast", "whiten"):
@@ -173,11 +173,8 @@ def _local_maxima(
     maxima = rep == F.max_pool2d(rep, kernel_size=3, stride=1, padding=1)
     maxima &= rep >= cfg.rep_thr
     maxima &= rel >= cfg.rel_thr
-    if pad:
-        inner = torch.zeros_like(maxima)
-        inner[..., pad:-pad, pad:-pad] = True
-        maxima &= inner
-    yx = maxima[0, 0].nonzero()
+    h, w = maxima.shape[-2:]
+    yx = maxima[0, 0, pad : h - pad, pad : w - pad].nonzero() + pad
     return yx[:, 0], yx[:, 1]
 
 
@@ -307,7 +304,7 @@ class LBurst:
         if net is None and runner is None:
             raise LBurstValueError("give a network or a runner")
         self._device = check_device(device)
-        self.pad = MultiScaleConfig(pad=pad).pad or 0  # checked as the config checks it; None: none
+        self.pad = 0 if pad is None else check_pad(pad)
         self.net = net.eval().to(self.device) if net is not None else None
         self.frames = net.config.frames if net is not None else int(frames)
         self.frame_order = frame_order
@@ -552,12 +549,13 @@ class LBurst:
             )
         x, _ = self._input(burst)
         h, w = x.shape[-2:]
-        xp, pad = self._reflect(x, MultiScaleConfig(pad=pad).pad)
+        xp, pad = self._reflect(x, pad)
+        inside = (..., slice(pad, pad + h), slice(pad, pad + w))  # the burst's pixels in the padded maps
         rep, rel, half = self.fast_net(xp)
-        rep, rel = rep[..., pad : pad + h, pad : pad + w], rel[..., pad : pad + h, pad : pad + w]
         stride = descriptor_stride(half.shape[-1], xp.shape[-1])
         desc = F.interpolate(half, scale_factor=float(stride), mode="bilinear", align_corners=False)
-        desc = F.normalize(desc[..., pad : pad + h, pad : pad + w], dim=1)
+        desc = F.normalize(desc[inside], dim=1)
+        rep, rel = rep[inside], rel[inside]
         if whiten:
             desc = self._whiten(desc, dim=1)
         desc = F.pad(desc, (0, w - desc.shape[-1], 0, h - desc.shape[-2]), mode="replicate")
@@ -657,7 +655,7 @@ class LBurst:
     def _reflect(self, x: torch.Tensor, pad: int | None) -> tuple[torch.Tensor, int]:
         """``x`` with ``pad`` pixels (``None``: :attr:`pad`) of reflected image on every side, at
         most one less than its shorter side (what reflection allows), and that pad."""
-        pad = min(self.pad if pad is None else pad, x.shape[-2] - 1, x.shape[-1] - 1)
+        pad = min(self.pad if pad is None else check_pad(pad), x.shape[-2] - 1, x.shape[-1] - 1)
         if not pad:
             return x, 0
         return F.pad(x, (pad,) * 4, mode="reflect").contiguous(memory_format=_layout(x)), pad

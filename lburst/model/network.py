@@ -247,14 +247,18 @@ WHITENING_KEYS = ("descriptor_mean", "descriptor_whitening")
 MAX_PAD = 256  # pixels of reflected border around a pyramid level (MultiScaleConfig.pad)
 
 
+def check_pad(pad, what: str = "pad") -> int:
+    """``pad`` as an int, or ``ValueError`` naming ``what`` unless it is an integer 0-:data:`MAX_PAD`."""
+    if isinstance(pad, bool) or not isinstance(pad, (int, np.integer)) or not 0 <= pad <= MAX_PAD:
+        raise LBurstValueError(f"{what} must be an integer 0-{MAX_PAD} (pixels), got {pad!r}")
+    return int(pad)
+
+
 def default_pad(meta: dict | None) -> int:
     """The reflected border (px) weights ask to be run with, ``meta['pad']``; 0 when they do
     not say (published weights, and lburst's shipped ones: docs/results.md, "A reflected
     border at extraction")."""
-    pad = (meta or {}).get("pad", 0)
-    if isinstance(pad, bool) or not isinstance(pad, (int, np.integer)) or not 0 <= pad <= MAX_PAD:
-        raise LBurstValueError(f"the weights' pad must be an integer 0-{MAX_PAD}, got {pad!r}")
-    return int(pad)
+    return check_pad((meta or {}).get("pad", 0), "the weights' pad")
 
 
 def network_from_net_string(net: str) -> LBurstNet | LiteNet:

@@ -27,7 +27,14 @@ from lburst.burst.io import atomic_path
 from lburst.extras import require
 from lburst.model.fast import CoreModule, FastLBurstNet, pad_maps
 from lburst.model.lite import LiteNet
-from lburst.model.network import WHITENING_KEYS, CheckpointError, LBurstNet, default_pad, load_checkpoint
+from lburst.model.network import (
+    WHITENING_KEYS,
+    CheckpointError,
+    LBurstNet,
+    check_pad,
+    default_pad,
+    load_checkpoint,
+)
 
 #: names of the exported graph's input and outputs
 INPUT_NAME = "burst"
@@ -106,7 +113,7 @@ def parse_meta(props: dict[str, str], path: str | Path) -> dict:
     try:
         return {
             "input": props.get("lburst.input", "burst"),
-            "pad": default_pad({"pad": int(props.get("lburst.pad", "0"))}),
+            "pad": check_pad(int(props.get("lburst.pad", "0")), "lburst.pad"),
             **{
                 k: np.asarray(json.loads(props[f"lburst.{k}"]), np.float32)
                 for k in WHITENING_KEYS

@@ -67,7 +67,7 @@ def test_onnx_light_model_extracts_through_lburst(net, exported):
     burst = np.random.default_rng(0).integers(0, 256, (3, 70, 90, 3), dtype=np.uint8)
     model = LBurst.from_onnx(exported)
     assert model.align  # the checkpoint's meta travels with the graph
-    assert model.pad == 0  # the light network runs without the reflected border
+    assert model.pad == 0  # no meta['pad']: no reflected border
     model.align = False
     got, ref = model.dense(burst), LBurst(net).dense(burst)
     for key in ref:
