@@ -117,6 +117,12 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "--teacher",
         help="distil from this frozen network on the same noisy bursts (a checkpoint or a shipped name, e.g. lburst-b5)",
     )
+    p.add_argument(
+        "--teacher-sees",
+        choices=("noisy", "clean"),
+        help="what --teacher reads: the student's noisy bursts (default) or the noise-free burst, "
+        "so a fine-tune is pulled towards its starting network's clean output",
+    )
     p.add_argument("--init", help="start from this checkpoint of our own (e.g. lburst/weights/lburst-b5.pt)")
     p.add_argument("--seed", type=integer(0))
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -145,6 +151,7 @@ def given_options(args: argparse.Namespace) -> dict:
         "spread_weight": args.spread_weight,
         "arch": args.arch,
         "teacher": args.teacher,
+        "teacher_sees": args.teacher_sees,
         "init": args.init,
         "checkpoint_every_s": args.checkpoint_every,
     }

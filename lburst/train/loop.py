@@ -126,7 +126,10 @@ class TrainConfig:
     ``'lburst-b5'``) makes the distillation target another network: the teacher, frozen,
     in eval mode, on the same noisy bursts A and B as the student, at every pixel
     (descriptors and both maps), instead of the network itself on the noise-free burst.
-    This is how the light network learns from lburst-b5.
+    This is how the light network learns from lburst-b5.  With ``teacher_sees='clean'``
+    the frozen teacher reads the noise-free burst A instead: a fine-tune then pulls its
+    noisy-burst output towards the starting network's clean-burst output, a target that,
+    unlike self-distillation's, cannot drift (flatten) together with the student.
 
     ``init`` starts the weights from a checkpoint of this project's own (for example the
     shipped ``lburst-b5``) instead of at random; the optimizer starts fresh.  A
@@ -156,6 +159,7 @@ class TrainConfig:
     spread_weight: float = 0.0
     arch: str = "lburst"
     teacher: str | None = None
+    teacher_sees: str = "noisy"
     init: str | None = None
     seed: int = 0
     workers: int = 1
@@ -226,6 +230,8 @@ PRESETS["lite"] = dict(
     lr=5e-4,
 )
 ARCHS = ("lburst", "lite")
+#: what ``TrainConfig.teacher`` reads: the student's noisy bursts, or the noise-free burst A
+TEACHER_INPUTS = ("noisy", "clean")
 
 
 def is_lite(arch: str) -> bool:
@@ -440,6 +446,10 @@ def train(
     if precision is not None:  # a property of the machine, not of the recipe: a resumed run may change it
         cfg = replace(cfg, precision=precision)
     check_precision(cfg.precision, device)
+    if cfg.teacher_sees not in TEACHER_INPUTS:
+        raise LBurstValueError(f"teacher_sees {cfg.teacher_sees!r}: use one of {', '.join(TEACHER_INPUTS)}")
+    if cfg.teacher_sees == "clean" and not (cfg.teacher and cfg.distill_weight > 0):
+        raise LBurstValueError("--teacher-sees clean needs a --teacher and a --distill-weight above 0")
     photos = list_photos([Path(p) for p in photo_folders])
     total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / (cfg.batch_size * ctx.world))
     if total < 1:
@@ -461,7 +471,8 @@ def train(
     layout = training_memory_format(device, memory_format)
     net = net.to(device).to(memory_format=layout)
     teacher = load_teacher(cfg.teacher, cfg.frames, device).to(memory_format=layout) if cfg.teacher else net
-    lite_distillation = is_lite(cfg.arch) and cfg.teacher is not None
+    teacher_on_noisy = cfg.teacher is not None and cfg.teacher_sees == "noisy"
+    lite_distillation = is_lite(cfg.arch) and teacher_on_noisy
     if lite_distillation:
         teacher = teacher_form(teacher, cfg.precision).to(device)
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -480,7 +491,7 @@ def train(
             tmp.write_text(json.dumps(_config_dict(cfg), indent=2))
     log = _read_log(out / "log.csv", step)
     loader = DataLoader(
-        PairDataset(photos, cfg.pair, cfg.seed, clean=cfg.distill_weight > 0 and not cfg.teacher),
+        PairDataset(photos, cfg.pair, cfg.seed, clean=cfg.distill_weight > 0 and not teacher_on_noisy),
         batch_size=cfg.batch_size,
         sampler=StreamSampler(step * cfg.batch_size * ctx.world + ctx.rank, ctx.world),
         num_workers=cfg.workers,
@@ -535,7 +546,7 @@ def train(
                     teacher=teacher,
                     memory_format=layout,
                     spread_weight=cfg.spread_weight,
-                    teacher_on_noisy=cfg.teacher is not None,
+                    teacher_on_noisy=teacher_on_noisy,
                     ap_border=cfg.ap_border,
                 )
             optimizer.zero_grad(set_to_none=True)

@@ -387,3 +387,26 @@ def test_a_calibrated_sensors_noise_takes_its_share_of_training_bursts(monkeypat
     names = {spec.split(",")[0] for spec in drawn}
     photons = [float(spec.split("photons=")[1]) for spec in drawn]
     assert names == set(pairs.SENSOR_MIX) and 3.0 <= min(photons) and max(photons) <= 60.0
+
+
+def test_a_teacher_on_the_clean_burst_is_frozen_and_needs_a_teacher(photos, tmp_path):
+    """``teacher_sees='clean'``: the frozen teacher reads the noise-free burst A (the loader
+    must then deliver it), its weights never move, and the option is refused without a
+    teacher or with an unknown input."""
+    base = TrainConfig(frames=3, batch_size=2, steps=1, patch=8, workers=0, pair=TINY)
+    train([photos], tmp_path / "start", base, progress=False)
+    start = tmp_path / "start" / "final.pt"
+    before = {k: v.clone() for k, v in load_checkpoint(start)[0].state_dict().items()}
+    cfg = replace(base, steps=2, init=str(start), teacher=str(start), teacher_sees="clean", distill_weight=1.0)
+    train([photos], tmp_path / "run", cfg, progress=False)
+    rows = _log(tmp_path / "run" / "log.csv")
+    assert [r["step"] for r in rows] == ["1", "2"]
+    assert all(float(r["distill"]) > 0 for r in rows)  # noisy student against clean target
+    for k, v in load_checkpoint(start)[0].state_dict().items():
+        torch.testing.assert_close(v, before[k], rtol=0, atol=0, msg=k)
+    moved = load_checkpoint(tmp_path / "run" / "final.pt")[0].state_dict()
+    assert any(not torch.equal(moved[k], before[k]) for k in before if before[k].is_floating_point())
+    with pytest.raises(ValueError, match="needs a --teacher"):
+        train([photos], tmp_path / "x", replace(base, teacher_sees="clean", distill_weight=1.0), progress=False)
+    with pytest.raises(ValueError, match="teacher_sees 'blurry'"):
+        train([photos], tmp_path / "y", replace(cfg, teacher_sees="blurry"), progress=False)
