@@ -7,7 +7,11 @@ means the same method (the folder is named after its spec and weights' SHA-1) an
 key in ``bench_key.json`` (:func:`run_key`): the scene's content and the options.  A
 scene whose bursts changed under the same names is run again; the features of unchanged
 bursts come from the features store (:mod:`lburst.store`).  A ``result.json`` without
-``bench_key.json`` (written before the key was kept) is taken as finished.  A finished
+``bench_key.json`` (written before the key was kept) is taken as finished.  With several
+``seeds`` each (method, scene) runs once per seed of COLMAP's RANSAC and mapper (seed 0 in
+``OUT/<method>/<scene>/``, seed S in ``OUT/<method>/<scene>-seedS/``), since single runs on a
+small scene can swing as much as the gaps between methods; :func:`lburst.sfm.metrics.seed_summary`
+gives each (method, scene)'s median and range.  A finished
 run is evaluated again against the scene's ``reference.json`` if that appeared or changed
 since (its SHA-1 is kept in the metrics as ``reference_sha1``), so a remade reference needs
 no rerun of the methods.  The table
@@ -19,14 +23,16 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from lburst.burst.io import atomic_path, file_sha1
+from lburst.errors import LBurstValueError
 from lburst.methods import method_slug
 from lburst.methods.learned import results_key
 from lburst.sfm.inputs import open_input
-from lburst.sfm.metrics import aggregate, evaluate_against_reference
+from lburst.sfm.metrics import aggregate, evaluate_against_reference, seed_summary
 from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP, ReconstructOptions
 from lburst.sfm.reconstruct import reconstruct_scene
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult
@@ -119,20 +125,41 @@ def colmap_error(result: ReconstructionResult) -> str | None:
 
 
 def run_benchmark(
-    scenes: list[str | Path], methods: list[str], out_dir: str | Path, force: bool = False, **options: Any
+    scenes: list[str | Path],
+    methods: list[str],
+    out_dir: str | Path,
+    force: bool = False,
+    seeds: Sequence[int] = (0,),
+    **options: Any,
 ) -> dict[str, Any]:
-    """Run every method on every scene; return ``{"rows": [...], "means": [...]}`` (also written to ``OUT/results.json``)."""
+    """Run every method on every scene (once per seed); return ``{"rows": [...], "means": [...],
+    "seeds": [...]}`` (also written to ``OUT/results.json``); ``means`` average every run of a method."""
     out_dir = Path(out_dir)
+    seeds = list(dict.fromkeys(seeds))
+    if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
+        raise LBurstValueError(f"seeds: non-negative integers, got {seeds}")
+    if "seed" in options:
+        raise LBurstValueError("pass COLMAP's seeds as seeds=[...], not seed=")
     rows = []
     for spec in methods:
         folder = out_dir / method_slug(results_key(spec))  # hashes the weights once per method
         for scene in map(Path, scenes):
-            rows.append(run_one(scene, spec, folder / scene.name, force, options))
+            for seed in seeds:  # seed 0 is ReconstructOptions' default: its runs keep their folder and key
+                name, extra = (scene.name, {}) if seed == 0 else (f"{scene.name}-seed{seed}", {"seed": seed})
+                rows.append({**run_one(scene, spec, folder / name, force, {**options, **extra}), "seed": seed})
     means = [
         {"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
         for spec in methods
     ]
-    report = {"scenes": [str(s) for s in scenes], "methods": methods, "options": options, "rows": rows, "means": means}
+    report = {
+        "scenes": [str(s) for s in scenes],
+        "methods": methods,
+        "options": options,
+        "seeds": seeds,
+        "rows": rows,
+        "means": means,
+        "by_seed": seed_summary(rows) if len(seeds) > 1 else [],
+    }
     with atomic_path(out_dir / "results.json") as tmp:
         tmp.write_text(json.dumps(report, indent=1))
     return report

@@ -9,7 +9,7 @@ from lburst.bench.reconstruction import run_benchmark
 from lburst.burst.io import atomic_path
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
-from lburst.sfm.metrics import markdown_table
+from lburst.sfm.metrics import markdown_table, seed_table
 from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
 
 
@@ -34,6 +34,14 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="one camera for all images of a scene (a recording has one by default)",
     )
     parser.add_argument("--threads", type=integer(1, 1024), default=2)
+    parser.add_argument(
+        "--seeds",
+        nargs="+",
+        type=integer(0),
+        default=[0],
+        help="run each method on each scene once per seed of COLMAP's RANSAC and mapper, and add a table of "
+        "medians and ranges (default: 0); runs are repeatable for one seed and thread count",
+    )
     add_matcher_argument(parser)
     parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")
 
@@ -44,6 +52,7 @@ def main(args: argparse.Namespace) -> int:
         args.methods,
         args.out,
         force=args.force,
+        seeds=args.seeds,
         pairs=args.pairs,
         overlap=args.overlap,
         fallback_exhaustive=args.fallback_exhaustive,
@@ -53,7 +62,12 @@ def main(args: argparse.Namespace) -> int:
         num_threads=args.threads,
         matcher=args.matcher,
     )
-    table = markdown_table(report["rows"] + report["means"])
+    rows = report["rows"]
+    if len(report["seeds"]) > 1:  # one row per run: say which seed
+        rows = [{**r, "scene": f"{r['scene']} (seed {r['seed']})"} for r in rows]
+    table = markdown_table(rows + report["means"])
+    if report["by_seed"]:
+        table += "\n\nOver the seeds " + ", ".join(map(str, report["seeds"])) + ":\n\n" + seed_table(report["by_seed"])
     with atomic_path(Path(args.out) / "table.md") as tmp:
         tmp.write_text(table + "\n")
     print(table)

@@ -234,3 +234,50 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
             cells.append("-" if value is None else fmt.format(value))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+#: the columns of :func:`seed_summary`: (key, column title, format)
+SEED_COLUMNS: list[tuple[str, str, str]] = [
+    ("registered_pct", "reg. %", "{:.1f}"),
+    ("points3D_per_image", "3D pts/img", "{:.0f}"),
+    ("ate_rmse", "ATE", "{:.3g}"),
+]
+
+
+def seed_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per (method, scene), over its runs with different seeds: ``runs``, ``converged`` (how many
+    made a model) and, for each :data:`SEED_COLUMNS` key, the median, min and max over the runs
+    that have it (``KEY``, ``KEY_min``, ``KEY_max``); a run without a model counts 0 registered
+    images and 0 points, and no trajectory error (as in :func:`aggregate`)."""
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault((row["method"], row["scene"]), []).append(row)
+    out = []
+    for (method, scene), runs in groups.items():
+        summary: dict[str, Any] = {"method": method, "scene": scene, "runs": len(runs)}
+        summary["converged"] = sum(1 for r in runs if r.get("converged"))
+        for key, _, _ in SEED_COLUMNS:
+            if key in TRAJECTORY_KEYS:
+                values = [r[key] for r in runs if r.get(key) is not None and r.get("converged")]
+            else:
+                values = [r.get(key) or 0.0 for r in runs]
+            if values:
+                summary.update({key: float(np.median(values)), f"{key}_min": min(values), f"{key}_max": max(values)})
+        out.append(summary)
+    return out
+
+
+def seed_table(summaries: list[dict[str, Any]]) -> str:
+    """A markdown table of :func:`seed_summary`: the median and, in brackets, the range."""
+    head = ["method", "scene", "runs", "models"] + [f"{title} median (range)" for _, title, _ in SEED_COLUMNS]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for s in summaries:
+        cells = [str(s["method"]), str(s["scene"]), str(s["runs"]), str(s["converged"])]
+        for key, _, fmt in SEED_COLUMNS:
+            if s.get(key) is None:
+                cells.append("-")
+            else:
+                low, high = (fmt.format(s[f"{key}_{end}"]) for end in ("min", "max"))
+                cells.append(f"{fmt.format(s[key])} ({low}-{high})")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)

@@ -104,3 +104,62 @@ def test_benchmark_runs_a_scene_again_when_its_bursts_change(tmp_path):
     assert again["keypoints_per_image"] == fresh["keypoints_per_image"] < first["keypoints_per_image"]
     assert again["registered"] == fresh["registered"]
     assert row("bench")["keypoints_per_image"] == again["keypoints_per_image"]
+
+
+def test_seed_summary_takes_medians_and_ranges_and_counts_failed_runs():
+    from lburst.sfm.metrics import seed_summary, seed_table
+
+    runs = [
+        {
+            "method": "m",
+            "scene": "s",
+            "converged": 1.0,
+            "registered_pct": 100.0,
+            "points3D_per_image": 90.0,
+            "ate_rmse": 0.2,
+        },
+        {
+            "method": "m",
+            "scene": "s",
+            "converged": 1.0,
+            "registered_pct": 90.0,
+            "points3D_per_image": 110.0,
+            "ate_rmse": 2.0,
+        },
+        {"method": "m", "scene": "s", "converged": 0.0, "error": "no model", "ate_rmse": 9.0},
+        {"method": "m", "scene": "t", "converged": 1.0, "registered_pct": 100.0, "points3D_per_image": 50.0},
+    ]
+    s, t = seed_summary(runs)
+    assert (s["runs"], s["converged"]) == (3, 2)
+    assert s["points3D_per_image"] == 90.0 and (s["points3D_per_image_min"], s["points3D_per_image_max"]) == (
+        0.0,
+        110.0,
+    )
+    assert s["registered_pct"] == 90.0
+    assert s["ate_rmse"] == 1.1 and s["ate_rmse_max"] == 2.0  # the failed run's error is no trajectory
+    assert t["runs"] == 1 and "ate_rmse" not in t
+    table = seed_table([s, t]).splitlines()
+    assert table[2] == "| m | s | 3 | 2 | 90.0 (0.0-100.0) | 90 (0-110) | 1.1 (0.2-2) |"
+    assert table[3].endswith("| 50 (50-50) | - |")
+
+
+def test_benchmark_runs_each_seed_in_its_own_folder(tmp_path):
+    import cv2
+    import numpy as np
+    import pytest
+
+    scene = tmp_path / "scene"
+    scene.mkdir()
+    for i in range(3):
+        image = np.random.default_rng(i).integers(0, 256, size=(120, 160, 3), dtype=np.uint8)
+        cv2.imwrite(str(scene / f"{i}.png"), cv2.GaussianBlur(image, (0, 0), 1.0))
+    report = run_benchmark([scene], ["sift"], tmp_path / "bench", seeds=[0, 7, 7], progress=False, num_threads=1)
+    assert [r["seed"] for r in report["rows"]] == [0, 7] and report["seeds"] == [0, 7]
+    folder = tmp_path / "bench" / method_slug("sift")
+    assert sorted(p.name for p in folder.iterdir()) == ["scene", "scene-seed7"]
+    keys = [json.loads((folder / n / "bench_key.json").read_text())["options"] for n in ("scene", "scene-seed7")]
+    assert "seed" not in keys[0] and keys[1]["seed"] == "7"  # seed 0 keeps the key of runs made before seeds
+    assert report["by_seed"][0]["runs"] == 2
+    for bad in ([], [-1], [True]):
+        with pytest.raises(ValueError, match="seeds"):
+            run_benchmark([scene], ["sift"], tmp_path / "bench", seeds=bad)
