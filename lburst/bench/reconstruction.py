@@ -124,6 +124,17 @@ def colmap_error(result: ReconstructionResult) -> str | None:
     return result.error if result.failed else None
 
 
+def _shared_features(scene: Path, folder: Path, options: dict[str, Any]) -> dict[str, Any]:
+    """A scene folder's runs with other seeds take the features from seed 0's run
+    (``OUT/<method>/<scene>/features``, :attr:`ReconstructOptions.features`), which the features
+    store serves when their key matches, so only matching and mapping run again."""
+    if options.get("features") is not None or not scene.is_dir():
+        return {}
+    if open_input(scene, options.get("recording")).folder:  # a recording's keyframes: computed again
+        return {}
+    return {"features": str(folder / scene.name / "features")}
+
+
 def run_benchmark(
     scenes: list[str | Path],
     methods: list[str],
@@ -145,7 +156,10 @@ def run_benchmark(
         folder = out_dir / method_slug(results_key(spec))  # hashes the weights once per method
         for scene in map(Path, scenes):
             for seed in seeds:  # seed 0 is ReconstructOptions' default: its runs keep their folder and key
-                name, extra = (scene.name, {}) if seed == 0 else (f"{scene.name}-seed{seed}", {"seed": seed})
+                if seed == 0:
+                    name, extra = scene.name, {}
+                else:
+                    name, extra = f"{scene.name}-seed{seed}", {"seed": seed, **_shared_features(scene, folder, options)}
                 rows.append({**run_one(scene, spec, folder / name, force, {**options, **extra}), "seed": seed})
     means = [
         {"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
