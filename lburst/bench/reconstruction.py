@@ -9,8 +9,9 @@ scene whose bursts changed under the same names is run again; the features of un
 bursts come from the features store (:mod:`lburst.store`).  A ``result.json`` without
 ``bench_key.json`` (written before the key was kept) is taken as finished.  With several
 ``seeds`` each (method, scene) runs once per seed of COLMAP's RANSAC and mapper (seed 0 in
-``OUT/<method>/<scene>/``, seed S in ``OUT/<method>/<scene>-seedS/``), since single runs on a
-small scene can swing as much as the gaps between methods; :func:`lburst.sfm.metrics.seed_summary`
+``OUT/<method>/<scene>/``, seed S in ``OUT/<method>/<scene>-seedS/``, the later seeds reading
+the first one's features), since single runs on a small scene can swing as much as the gaps
+between methods; :func:`lburst.sfm.metrics.seed_summary`
 gives each (method, scene)'s median and range.  A finished
 run is evaluated again against the scene's ``reference.json`` if that appeared or changed
 since (its SHA-1 is kept in the metrics as ``reference_sha1``), so a remade reference needs
@@ -124,15 +125,20 @@ def colmap_error(result: ReconstructionResult) -> str | None:
     return result.error if result.failed else None
 
 
-def _shared_features(scene: Path, folder: Path, options: dict[str, Any]) -> dict[str, Any]:
-    """A scene folder's runs with other seeds take the features from seed 0's run
-    (``OUT/<method>/<scene>/features``, :attr:`ReconstructOptions.features`), which the features
-    store serves when their key matches, so only matching and mapping run again."""
+def run_name(scene: Path, seed: int) -> str:
+    """The run's folder under ``OUT/<method>/``: the scene's name, with ``-seedS`` for a seed other than 0."""
+    return scene.name if seed == 0 else f"{scene.name}-seed{seed}"
+
+
+def _shared_features(scene: Path, first: Path, options: dict[str, Any]) -> dict[str, Any]:
+    """A scene folder's runs with the other seeds take the features from the first seed's run
+    ``first`` (its ``features/``, :attr:`ReconstructOptions.features`), which the features store
+    serves when their key matches, so only matching and mapping run again."""
     if options.get("features") is not None or not scene.is_dir():
         return {}
     if open_input(scene, options.get("recording")).folder:  # a recording's keyframes: computed again
         return {}
-    return {"features": str(folder / scene.name / "features")}
+    return {"features": str(first / "features")}
 
 
 def run_benchmark(
@@ -155,12 +161,13 @@ def run_benchmark(
     for spec in methods:
         folder = out_dir / method_slug(results_key(spec))  # hashes the weights once per method
         for scene in map(Path, scenes):
+            first = folder / run_name(scene, seeds[0])
             for seed in seeds:  # seed 0 is ReconstructOptions' default: its runs keep their folder and key
-                if seed == 0:
-                    name, extra = scene.name, {}
-                else:
-                    name, extra = f"{scene.name}-seed{seed}", {"seed": seed, **_shared_features(scene, folder, options)}
-                rows.append({**run_one(scene, spec, folder / name, force, {**options, **extra}), "seed": seed})
+                extra = {} if seed == 0 else {"seed": seed}
+                if seed != seeds[0]:
+                    extra.update(_shared_features(scene, first, options))
+                out = folder / run_name(scene, seed)
+                rows.append({**run_one(scene, spec, out, force, {**options, **extra}), "seed": seed})
     means = [
         {"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
         for spec in methods
