@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from lburst.sfm.colmap import ColmapJob, default_camera, pycolmap, read_inliers, write_database
+from lburst.sfm.colmap import ColmapJob, ColmapOptions, default_camera, pycolmap, read_inliers, write_database
 from lburst.sfm.metrics import epipolar_distances
 
 
@@ -135,3 +135,48 @@ def test_a_long_stage_is_reported_while_it_runs(tmp_path):
     now[0] = 100.0
     reader.poll()  # no stage under way: silence
     assert len(lines) == 2
+
+
+def test_the_mapper_runs_again_while_images_stay_unregistered(tmp_path, monkeypatch):
+    """map_database keeps the attempt with the most registered images (then 3D points), with a
+    new seed per attempt, and stops once every image of the database is registered."""
+    import lburst.sfm.colmap as colmap
+
+    job, keypoints, pairs, matches = small_job(tmp_path)
+    write_database(tmp_path / "database.db", job, keypoints, pairs, matches)
+
+    class Model:
+        def __init__(self, images, points):
+            self.images, self.points = images, points
+
+        def num_reg_images(self):
+            return self.images
+
+        def num_points3D(self):
+            return self.points
+
+    runs = {0: Model(2, 50), 10007: Model(2, 80), 20014: Model(3, 10), 30021: Model(3, 99)}
+    seeds = []
+
+    def one_run(db, images, folder, options, stages, use_priors, label=""):
+        seeds.append((options.seed, folder.name))
+        return runs[options.seed]
+
+    monkeypatch.setattr(colmap, "_map_once", one_run)
+    best = colmap.map_database(
+        tmp_path / "database.db", tmp_path, tmp_path / "sparse", ColmapOptions(mapper_attempts=4)
+    )
+    assert best is runs[20014]  # every image registered: no fourth attempt
+    assert seeds == [(0, "sparse"), (10007, "attempt1"), (20014, "attempt2")]
+    seeds.clear()
+    best = colmap.map_database(
+        tmp_path / "database.db", tmp_path, tmp_path / "sparse", ColmapOptions(mapper_attempts=2)
+    )
+    assert best is runs[10007] and len(seeds) == 2  # same images registered: more 3D points
+    seeds.clear()
+    assert (
+        colmap.map_database(tmp_path / "database.db", tmp_path, tmp_path / "s", ColmapOptions(mapper_attempts=1))
+        is runs[0]
+    )
+    with pytest.raises(ValueError, match="mapper_attempts"):
+        ColmapOptions(mapper_attempts=0)
