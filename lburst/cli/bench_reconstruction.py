@@ -28,6 +28,12 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
     parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
     parser.add_argument(
+        "--fix-intrinsics",
+        action="store_const",
+        const=True,
+        help="hold the cameras' intrinsics fixed (with --camera reference: the scenes' calibration)",
+    )
+    parser.add_argument(
         "--single-camera",
         action="store_const",
         const=True,
@@ -59,6 +65,7 @@ def main(args: argparse.Namespace) -> int:
         mapper=args.mapper,
         camera=args.camera,
         single_camera=args.single_camera,
+        **({"fix_intrinsics": True} if args.fix_intrinsics else {}),
         num_threads=args.threads,
         matcher=args.matcher,
     )
