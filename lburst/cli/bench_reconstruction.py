@@ -29,8 +29,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
     parser.add_argument(
         "--fix-intrinsics",
-        action="store_const",
-        const=True,
+        action="store_true",
         help="hold the cameras' intrinsics fixed (with --camera reference: the scenes' calibration)",
     )
     parser.add_argument(
@@ -65,7 +64,7 @@ def main(args: argparse.Namespace) -> int:
         mapper=args.mapper,
         camera=args.camera,
         single_camera=args.single_camera,
-        **({"fix_intrinsics": True} if args.fix_intrinsics else {}),
+        **({"fix_intrinsics": True} if args.fix_intrinsics else {}),  # unset: the key of earlier runs
         num_threads=args.threads,
         matcher=args.matcher,
     )
