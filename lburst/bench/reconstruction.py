@@ -161,11 +161,11 @@ def run_benchmark(
     for spec in methods:
         folder = out_dir / method_slug(results_key(spec))  # hashes the weights once per method
         for scene in map(Path, scenes):
-            first = folder / run_name(scene, seeds[0])
+            shared = _shared_features(scene, folder / run_name(scene, seeds[0]), options) if len(seeds) > 1 else {}
             for seed in seeds:  # seed 0 is ReconstructOptions' default: its runs keep their folder and key
                 extra = {} if seed == 0 else {"seed": seed}
                 if seed != seeds[0]:
-                    extra.update(_shared_features(scene, first, options))
+                    extra.update(shared)
                 out = folder / run_name(scene, seed)
                 rows.append({**run_one(scene, spec, out, force, {**options, **extra}), "seed": seed})
     means = [

@@ -13,7 +13,7 @@ from lburst.cli.numbers import integer, real
 from lburst.errors import LBurstValueError
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.paths import shared_dir
-from lburst.train.loop import PRESETS, TrainConfig, check_resume_options, saved_run_length, train
+from lburst.train.loop import PRESETS, TEACHER_INPUTS, TrainConfig, check_resume_options, saved_run_length, train
 from lburst.train.pairs import SENSOR_MIX, PairConfig
 
 
@@ -119,7 +119,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--teacher-sees",
-        choices=("noisy", "clean"),
+        choices=TEACHER_INPUTS,
         help="what --teacher reads: the student's noisy bursts (default) or the noise-free burst, "
         "so a fine-tune is pulled towards its starting network's clean output",
     )

@@ -84,15 +84,23 @@ def test_benchmark_evaluates_again_when_the_reference_is_remade(tmp_path):
     assert ReconstructionResult.load(out / "result.json").metrics["ate_rmse"] == second["ate_rmse"]
 
 
-def test_benchmark_runs_a_scene_again_when_its_bursts_change(tmp_path):
+def _textured_scene(scene):
+    """A scene folder of three 160x120 photos of blurred noise (seeded), enough texture for SIFT."""
     import cv2
     import numpy as np
 
-    scene = tmp_path / "scene"
     scene.mkdir()
     for i in range(3):
         image = np.random.default_rng(i).integers(0, 256, size=(120, 160, 3), dtype=np.uint8)
         cv2.imwrite(str(scene / f"{i}.png"), cv2.GaussianBlur(image, (0, 0), 1.0))
+    return scene
+
+
+def test_benchmark_runs_a_scene_again_when_its_bursts_change(tmp_path):
+    import cv2
+    import numpy as np
+
+    scene = _textured_scene(tmp_path / "scene")
 
     def row(out):
         return run_benchmark([scene], ["sift"], tmp_path / out, progress=False, num_threads=1)["rows"][0]
@@ -144,15 +152,9 @@ def test_seed_summary_takes_medians_and_ranges_and_counts_failed_runs():
 
 
 def test_benchmark_runs_each_seed_in_its_own_folder(tmp_path):
-    import cv2
-    import numpy as np
     import pytest
 
-    scene = tmp_path / "scene"
-    scene.mkdir()
-    for i in range(3):
-        image = np.random.default_rng(i).integers(0, 256, size=(120, 160, 3), dtype=np.uint8)
-        cv2.imwrite(str(scene / f"{i}.png"), cv2.GaussianBlur(image, (0, 0), 1.0))
+    scene = _textured_scene(tmp_path / "scene")
     report = run_benchmark([scene], ["sift"], tmp_path / "bench", seeds=[0, 7, 7], progress=False, num_threads=1)
     assert [r["seed"] for r in report["rows"]] == [0, 7] and report["seeds"] == [0, 7]
     folder = tmp_path / "bench" / method_slug("sift")
