@@ -84,6 +84,21 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "180 trains descriptors to match views turned any way",
     )
     p.add_argument(
+        "--scale-range",
+        type=real(0.1, 10),
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        help="range of the isotropic scale between the two bursts of a training pair, drawn log-uniformly "
+        "(presets: 0.8 1.25; R2D2 rescales its second image to 256-1024 px, a far wider range)",
+    )
+    p.add_argument(
+        "--max-tilt",
+        type=real(0, 0.9),
+        metavar="FRACTION",
+        help="largest perspective tilt between the two bursts: one edge of the crop shrinks and the opposite "
+        "one grows by up to this fraction of its length (presets: 0.15)",
+    )
+    p.add_argument(
         "--noise-std",
         type=real(0, 255),
         nargs=2,
@@ -167,7 +182,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         try:
             cfg = replace(cfg, pair=replace(cfg.pair, **pair))
         except LBurstValueError as exc:
-            raise LBurstValueError(f"--noise-std/--sensor-prob/--sensors: {exc}") from exc
+            raise LBurstValueError(f"--scale-range/--max-tilt/--noise-std/--sensor-prob/--sensors: {exc}") from exc
     if args.frames is not None:
         cfg = replace(cfg, pair=replace(cfg.pair, frames=args.frames))
     elif cfg.pair.frames != cfg.frames:
@@ -183,6 +198,8 @@ def given_pair_options(args: argparse.Namespace) -> dict:
     """The PairConfig fields set on the command line (``None``: not given)."""
     return {
         "max_rotation_deg": getattr(args, "max_rotation", None),
+        "scale_range": tuple(args.scale_range) if getattr(args, "scale_range", None) else None,
+        "max_tilt": getattr(args, "max_tilt", None),
         "noise_std": tuple(args.noise_std) if getattr(args, "noise_std", None) else None,
         "sensor_prob": getattr(args, "sensor_prob", None),
         "sensors": tuple(args.sensors) if getattr(args, "sensors", None) else None,
@@ -191,6 +208,8 @@ def given_pair_options(args: argparse.Namespace) -> dict:
 
 PAIR_FLAGS = {
     "max_rotation_deg": "--max-rotation",
+    "scale_range": "--scale-range",
+    "max_tilt": "--max-tilt",
     "noise_std": "--noise-std",
     "sensor_prob": "--sensor-prob",
     "sensors": "--sensors",

@@ -90,6 +90,11 @@ class PairConfig:
         low, high = self.noise_std
         if not 0.0 <= low <= high:
             raise LBurstValueError(f"noise_std ({low:g}, {high:g}) must be a range LOW <= HIGH of stds >= 0")
+        low, high = self.scale_range
+        if not 0.0 < low <= high:
+            raise LBurstValueError(f"scale_range ({low:g}, {high:g}) must be a range 0 < LOW <= HIGH")
+        if not 0.0 <= self.max_tilt < 1.0:
+            raise LBurstValueError(f"max_tilt {self.max_tilt:g} must lie in [0, 1)")
         if not 0.0 <= self.sensor_prob <= 1.0 - self.lowlight_prob:
             raise LBurstValueError(
                 f"sensor_prob {self.sensor_prob} must lie in [0, 1 - lowlight_prob] = [0, {1.0 - self.lowlight_prob:g}]"

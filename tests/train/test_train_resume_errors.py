@@ -177,3 +177,34 @@ def test_the_noise_range_is_set_checked_and_kept_by_a_resumed_run(tmp_path):
     with pytest.raises(ValueError, match=r"leave out --noise-std 50 140 \(the run has 25 120\)"):
         _check_resumed_pairs(tmp_path, {"noise_std": (50.0, 140.0)})
     _check_resumed_pairs(tmp_path, {"noise_std": (25.0, 120.0)})
+
+
+def test_the_viewpoint_range_is_set_checked_reaches_the_homography_and_is_kept_by_a_resumed_run(tmp_path):
+    import numpy as np
+
+    from lburst.cli.train import _check_resumed_pairs
+    from lburst.errors import LBurstValueError
+    from lburst.train.pairs import random_homography
+
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    new = ["--out", str(tmp_path / "new"), "--preset", "aligned"]
+    preset = config_from_args(parser.parse_args(new)).pair
+    assert (preset.scale_range, preset.max_tilt) == ((0.8, 1.25), 0.15)
+    cfg = config_from_args(
+        parser.parse_args([*new, "--scale-range", "2", "2", "--max-tilt", "0", "--max-rotation", "0"])
+    )
+    assert (cfg.pair.scale_range, cfg.pair.max_tilt) == ((2.0, 2.0), 0.0)
+    g = random_homography(np.random.default_rng(0), replace(cfg.pair, max_pair_shift=0.0))
+    c = (cfg.pair.crop - 1) / 2
+    np.testing.assert_allclose(g, [[2, 0, -c], [0, 2, -c], [0, 0, 1]], atol=1e-9)  # 2x about the crop's centre
+    with pytest.raises(LBurstValueError, match=r"scale_range \(2, 0.5\) must be a range 0 < LOW <= HIGH"):
+        config_from_args(parser.parse_args([*new, "--scale-range", "2", "0.5"]))
+    with pytest.raises(SystemExit):
+        parser.parse_args([*new, "--max-tilt", "1.5"])
+    (tmp_path / "config.json").write_text(json.dumps({"pair": {"scale_range": [0.8, 1.25]}}))
+    with pytest.raises(ValueError, match=r"leave out --scale-range 0.5 2 \(the run has 0.8 1.25\)"):
+        _check_resumed_pairs(tmp_path, {"scale_range": (0.5, 2.0)})
+    with pytest.raises(ValueError, match=r"leave out --max-tilt 0.3 \(the run has 0.15\)"):
+        _check_resumed_pairs(tmp_path, {"max_tilt": 0.3})
+    _check_resumed_pairs(tmp_path, {"scale_range": (0.8, 1.25), "max_tilt": None})
