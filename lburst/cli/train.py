@@ -99,6 +99,14 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "one grows by up to this fraction of its length (presets: 0.15)",
     )
     p.add_argument(
+        "--color-jitter",
+        type=real(0, 1),
+        nargs=4,
+        metavar=("BRIGHTNESS", "CONTRAST", "SATURATION", "HUE"),
+        help="largest colour change of a pair's second burst against its first: relative brightness, contrast "
+        "and saturation, and hue as a fraction of the colour circle (presets: 0 0 0 0; R2D2: 0.2 0.2 0.2 0.1)",
+    )
+    p.add_argument(
         "--noise-std",
         type=real(0, 255),
         nargs=2,
@@ -182,7 +190,9 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         try:
             cfg = replace(cfg, pair=replace(cfg.pair, **pair))
         except LBurstValueError as exc:
-            raise LBurstValueError(f"--scale-range/--max-tilt/--noise-std/--sensor-prob/--sensors: {exc}") from exc
+            raise LBurstValueError(
+                f"--scale-range/--max-tilt/--color-jitter/--noise-std/--sensor-prob/--sensors: {exc}"
+            ) from exc
     if args.frames is not None:
         cfg = replace(cfg, pair=replace(cfg.pair, frames=args.frames))
     elif cfg.pair.frames != cfg.frames:
@@ -200,6 +210,7 @@ def given_pair_options(args: argparse.Namespace) -> dict:
         "max_rotation_deg": getattr(args, "max_rotation", None),
         "scale_range": tuple(args.scale_range) if getattr(args, "scale_range", None) else None,
         "max_tilt": getattr(args, "max_tilt", None),
+        "color_jitter": tuple(args.color_jitter) if getattr(args, "color_jitter", None) else None,
         "noise_std": tuple(args.noise_std) if getattr(args, "noise_std", None) else None,
         "sensor_prob": getattr(args, "sensor_prob", None),
         "sensors": tuple(args.sensors) if getattr(args, "sensors", None) else None,
@@ -210,6 +221,7 @@ PAIR_FLAGS = {
     "max_rotation_deg": "--max-rotation",
     "scale_range": "--scale-range",
     "max_tilt": "--max-tilt",
+    "color_jitter": "--color-jitter",
     "noise_std": "--noise-std",
     "sensor_prob": "--sensor-prob",
     "sensors": "--sensors",

@@ -46,6 +46,10 @@ class PairConfig:
         dark_prob, dark_range: probability and range of a per-burst exposure factor
             applied before the noise (darker images, same noise: lower SNR).
         gamma_range: per-burst gamma jitter applied before the exposure factor.
+        color_jitter: largest change of brightness, contrast and saturation (relative) and of
+            hue (a fraction of the colour circle) of burst B against burst A, drawn per pair,
+            as R2D2's ``ColorJitter(0.2, 0.2, 0.2, 0.1)`` changes its second image; zeros
+            (the presets) leave the colours alone.
         burst_rotation_deg, burst_zoom, burst_flow_px: in-burst motion beyond the
             translation (:class:`lburst.burst.motion.BurstMotion`): largest rotation per frame,
             largest relative zoom per frame, largest std of the smooth non-uniform flow
@@ -77,6 +81,7 @@ class PairConfig:
     dark_prob: float = 0.0
     dark_range: tuple[float, float] = (0.15, 1.0)
     gamma_range: tuple[float, float] = (1.0, 1.0)
+    color_jitter: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     burst_rotation_deg: float = 0.0
     burst_zoom: float = 0.0
     burst_flow_px: float = 0.0
@@ -93,6 +98,10 @@ class PairConfig:
         low, high = self.scale_range
         if not 0.0 < low <= high:
             raise LBurstValueError(f"scale_range ({low:g}, {high:g}) must be a range 0 < LOW <= HIGH")
+        if len(self.color_jitter) != 4 or not all(0.0 <= v <= 1.0 for v in self.color_jitter):
+            raise LBurstValueError(
+                f"color_jitter {self.color_jitter} must be four numbers in [0, 1]: brightness, contrast, saturation, hue"
+            )
         if not 0.0 <= self.max_tilt < 1.0:
             raise LBurstValueError(f"max_tilt {self.max_tilt:g} must lie in [0, 1)")
         if not 0.0 <= self.sensor_prob <= 1.0 - self.lowlight_prob:
@@ -172,6 +181,28 @@ def _exposure(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> 
     if rng.random() < cfg.dark_prob:
         frames = frames * rng.uniform(*cfg.dark_range)
     return frames
+
+
+#: RGB to YIQ: luma, then the two chroma axes a hue shift turns.
+_YIQ = np.array([[0.299, 0.587, 0.114], [0.596, -0.274, -0.322], [0.211, -0.523, 0.312]])
+
+
+def color_jitter(frames: np.ndarray, rng: np.random.Generator, jitter: tuple[float, float, float, float]) -> np.ndarray:
+    """The burst ``frames`` (0..255) with one random brightness, contrast, saturation and hue change
+    for all its frames: factors drawn in ``1 +- jitter[0..2]``, a hue turn of up to ``jitter[3]``
+    of the circle (in YIQ).  Clipped to 0..255."""
+    brightness, contrast, saturation, hue = jitter
+    if not any(jitter):
+        return frames
+    f_b, f_c, f_s = (rng.uniform(1 - j, 1 + j) for j in (brightness, contrast, saturation))
+    angle = 2 * np.pi * rng.uniform(-hue, hue)
+    turn = np.array([[1, 0, 0], [0, np.cos(angle), -np.sin(angle)], [0, np.sin(angle), np.cos(angle)]])
+    # YIQ: scale the luma by brightness, the chroma by saturation, turn the chroma by the hue angle
+    mix = np.linalg.inv(_YIQ) @ turn @ np.diag([f_b, f_b * f_s, f_b * f_s]) @ _YIQ
+    out = frames @ mix.T.astype(np.float32)
+    mean = float((out[len(out) // 2] @ _YIQ[0].astype(np.float32)).mean())  # the common frame's mean luma
+    out = (out - mean) * f_c + mean
+    return np.clip(out, 0, 255).astype(np.float32)
 
 
 def _noise(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:
@@ -266,7 +297,7 @@ def training_pair(photo: np.ndarray, rng: np.random.Generator, cfg: PairConfig =
     burst_b = _render(photo, b_to_photo, crop, motion_b, cfg.frames)
     clean_a = _exposure(burst_a, rng, cfg)
     burst_a = _noise(clean_a, rng, cfg)
-    burst_b = _noise(_exposure(burst_b, rng, cfg), rng, cfg)
+    burst_b = _noise(_exposure(color_jitter(burst_b, rng, cfg.color_jitter), rng, cfg), rng, cfg)
     if cfg.align_error_px is not None:
         shifts_a = _estimated_shifts(motion_a, cfg, rng)
         clean_a = _align(np.clip(np.round(clean_a), 0, 255), shifts_a)

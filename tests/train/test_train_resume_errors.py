@@ -208,3 +208,37 @@ def test_the_viewpoint_range_is_set_checked_reaches_the_homography_and_is_kept_b
     with pytest.raises(ValueError, match=r"leave out --max-tilt 0.3 \(the run has 0.15\)"):
         _check_resumed_pairs(tmp_path, {"max_tilt": 0.3})
     _check_resumed_pairs(tmp_path, {"scale_range": (0.8, 1.25), "max_tilt": None})
+
+
+def test_color_jitter_changes_the_second_burst_as_set_and_is_kept_by_a_resumed_run(tmp_path):
+    import numpy as np
+
+    from lburst.cli.train import _check_resumed_pairs
+    from lburst.train.pairs import color_jitter
+
+    rng = np.random.default_rng(0)
+    burst = rng.uniform(40, 180, (3, 16, 16, 3))  # no clipping at 1.3x.astype(np.float32)
+    assert color_jitter(burst, rng, (0.0, 0.0, 0.0, 0.0)) is burst
+    luma = np.array([0.299, 0.587, 0.114], np.float32)
+    gray = np.repeat((burst @ luma)[..., None], 3, -1)
+    # saturation alone keeps the luma; a grey burst has no hue or saturation to change
+    sat = color_jitter(burst, np.random.default_rng(1), (0.0, 0.0, 0.5, 0.0))
+    np.testing.assert_allclose(sat @ luma, burst @ luma, atol=1e-3)
+    assert np.abs(sat - burst).max() > 1
+    np.testing.assert_allclose(color_jitter(gray, np.random.default_rng(2), (0.0, 0.0, 0.5, 0.5)), gray, atol=1e-3)
+    # brightness scales every pixel by one factor, the same in every frame
+    bright = color_jitter(burst, np.random.default_rng(3), (0.3, 0.0, 0.0, 0.0))
+    factor = bright / burst
+    assert np.ptp(factor) < 1e-4 and 0.7 <= factor.mean() <= 1.3 and abs(factor.mean() - 1) > 1e-3
+
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    new = ["--out", str(tmp_path / "new"), "--preset", "aligned"]
+    assert config_from_args(parser.parse_args(new)).pair.color_jitter == (0.0, 0.0, 0.0, 0.0)
+    cfg = config_from_args(parser.parse_args([*new, "--color-jitter", "0.2", "0.2", "0.2", "0.1"]))
+    assert cfg.pair.color_jitter == (0.2, 0.2, 0.2, 0.1)
+    with pytest.raises(SystemExit):
+        parser.parse_args([*new, "--color-jitter", "0.2", "0.2", "2", "0.1"])
+    (tmp_path / "config.json").write_text(json.dumps({"pair": {}}))
+    with pytest.raises(ValueError, match=r"leave out --color-jitter 0.2 0.2 0.2 0.1 \(the run has 0 0 0 0\)"):
+        _check_resumed_pairs(tmp_path, {"color_jitter": (0.2, 0.2, 0.2, 0.1)})
