@@ -1,0 +1,167 @@
+"""Which putative matches of a reconstruction are right, judged by the scene's reference poses.
+
+For every putative match that ``lburst bench reconstruction`` stored (``matches.h5`` and
+``features.h5`` of OUT/<method>/<scene>/), the Sampson distance to the epipolar geometry of
+the scene's ``reference.json`` (its cameras, with their distortion, and poses) is its error in
+pixels.  Tables, one row per method:
+
+- errors: the share of putative matches under 0.5, 1, 2 and 4 px and over 8 px (a match
+  under 4 px is counted right, one over 8 px wrong);
+- by keypoint score: right and wrong matches among the keypoints of each score quartile of
+  the method's own keypoints (a match's score: the lower of its two keypoints');
+- by scale change: right matches summed over the pairs whose scale change (a similarity
+  fitted to the right matches of all methods together) lies in each band.
+
+    python scripts/match_errors.py outputs/scenes/sacre_coeur_g50 \
+        outputs/recon_seeds_g50/lburst_*/sacre_coeur_g50 outputs/recon_seeds_g50/B5.pt*/sacre_coeur_g50 \
+        --labels lburst-b5 published --out outputs/match_errors_g50.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import cv2
+import h5py
+import numpy as np
+import pycolmap
+
+RIGHT_PX, WRONG_PX = 4.0, 8.0
+ERROR_EDGES = (0.5, 1.0, 2.0, 4.0)
+SCALE_BANDS = ((1.0, 1.2), (1.2, 1.5), (1.5, np.inf))
+MIN_FIT = 30  # right matches needed to fit a pair's similarity
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def reference_geometry(scene: Path):
+    """Cameras (pycolmap) and world-to-camera poses (R, t) by image name."""
+    ref = json.loads((scene / "reference.json").read_text())
+    cameras = {
+        name: pycolmap.Camera(model=c["model"], width=c["width"], height=c["height"], params=c["params"])
+        for name, c in ref["cameras"].items()
+    }
+    poses = {name: (np.array(p["R"]), np.array(p["t"])) for name, p in ref["images"].items()}
+    return cameras, poses
+
+
+def sampson_px(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray) -> np.ndarray:
+    """Sampson distance (px, at the geometric mean focal length) of matches ka <-> kb."""
+    xa = np.c_[cameras[a].cam_from_img(ka.astype(np.float64)), np.ones(len(ka))]
+    xb = np.c_[cameras[b].cam_from_img(kb.astype(np.float64)), np.ones(len(kb))]
+    (ra, ta), (rb, tb) = poses[a], poses[b]
+    rot = rb @ ra.T
+    essential = skew(tb - rot @ ta) @ rot
+    la, lb = xa @ essential.T, xb @ essential
+    d2 = np.sum(xb * la, 1) ** 2 / (la[:, 0] ** 2 + la[:, 1] ** 2 + lb[:, 0] ** 2 + lb[:, 1] ** 2)
+    return np.sqrt(d2) * np.sqrt(cameras[a].params[0] * cameras[b].params[0])
+
+
+def putative_matches(run: Path, cameras, poses) -> dict:
+    """Per pair (a, b): keypoints of both sides, the lower score, and the error in px."""
+    out = {}
+    with h5py.File(run / "features.h5", "r") as feats, h5py.File(run / "matches.h5", "r") as matches:
+        for a in matches:
+            for b in matches[a]:
+                m = matches[a][b]["matches0"][()]
+                i = np.flatnonzero(m >= 0)
+                ka, kb = feats[a]["keypoints"][()][i], feats[b]["keypoints"][()][m[i]]
+                score = np.minimum(feats[a]["scores"][()][i], feats[b]["scores"][()][m[i]])
+                na, nb = Path(a).stem, Path(b).stem
+                out[tuple(sorted((na, nb)))] = (ka, kb, score, sampson_px(cameras, poses, na, nb, ka, kb))
+        scores = np.concatenate([feats[name]["scores"][()] for name in feats])
+    return {"pairs": out, "scores": scores}
+
+
+def pair_scales(runs: list[dict]) -> dict:
+    """Scale change per pair, from a similarity fitted to all runs' right matches."""
+    scales = {}
+    for pair in runs[0]["pairs"]:
+        parts = [(r["pairs"][pair][0], r["pairs"][pair][1]) for r in runs if pair in r["pairs"]]
+        right = [r["pairs"][pair][3] < RIGHT_PX for r in runs if pair in r["pairs"]]
+        ka = np.concatenate([p[0][ok] for p, ok in zip(parts, right)])
+        kb = np.concatenate([p[1][ok] for p, ok in zip(parts, right)])
+        if len(ka) >= MIN_FIT:
+            m, _ = cv2.estimateAffinePartial2D(ka, kb, ransacReprojThreshold=WRONG_PX)
+            if m is not None:
+                s = float(np.hypot(m[0, 0], m[1, 0]))
+                scales[pair] = max(s, 1 / s)
+    return scales
+
+
+def summary(run: dict, scales: dict) -> dict:
+    errors = np.concatenate([p[3] for p in run["pairs"].values()])
+    score = np.concatenate([p[2] for p in run["pairs"].values()])
+    edges = np.quantile(run["scores"], [0, 0.25, 0.5, 0.75, 1])
+    edges[0], edges[-1] = -np.inf, np.inf
+    quartile = np.clip(np.searchsorted(edges, score, side="right") - 1, 0, 3)
+    by_scale = []
+    for lo, hi in SCALE_BANDS:
+        pairs = [k for k, s in scales.items() if lo <= s < hi and k in run["pairs"]]
+        by_scale.append(
+            {
+                "band": [lo, hi],
+                "pairs": len(pairs),
+                "right": int(sum((run["pairs"][k][3] < RIGHT_PX).sum() for k in pairs)),
+            }
+        )
+    return {
+        "putative": int(len(errors)),
+        "share_under": {str(e): float(np.mean(errors < e)) for e in ERROR_EDGES},
+        "share_wrong": float(np.mean(errors > WRONG_PX)),
+        "right": int(np.sum(errors < RIGHT_PX)),
+        "wrong": int(np.sum(errors > WRONG_PX)),
+        "by_score_quartile": [
+            {
+                "right": int(np.sum((quartile == q) & (errors < RIGHT_PX))),
+                "wrong": int(np.sum((quartile == q) & (errors > WRONG_PX))),
+            }
+            for q in range(4)
+        ],
+        "by_scale": by_scale,
+    }
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene", type=Path, help="scene folder with reference.json")
+    p.add_argument("runs", type=Path, nargs="+", help="OUT/<method>/<scene> folders of lburst bench reconstruction")
+    p.add_argument("--labels", nargs="+", help="a name per run (default: the method folder's)")
+    p.add_argument("--out", type=Path, help="write the tables as JSON")
+    args = p.parse_args()
+    labels = args.labels or [r.parent.name for r in args.runs]
+    if len(labels) != len(args.runs):
+        p.error(f"{len(args.runs)} runs but {len(labels)} labels")
+    cameras, poses = reference_geometry(args.scene)
+    runs = [putative_matches(r, cameras, poses) for r in args.runs]
+    scales = pair_scales(runs)
+    results = {label: summary(run, scales) for label, run in zip(labels, runs)}
+
+    print(
+        "| method | putative | <0.5 px | <1 px | <2 px | <4 px (right) | >8 px (wrong) |\n|---|---|---|---|---|---|---|"
+    )
+    for label, r in results.items():
+        shares = " | ".join(f"{r['share_under'][str(e)]:.3f}" for e in ERROR_EDGES)
+        print(f"| {label} | {r['putative']} | {shares} | {r['share_wrong']:.3f} |")
+    print("\nright / wrong matches by the score quartile of the method's keypoints (lowest first):\n")
+    print("| method | Q1 | Q2 | Q3 | Q4 |\n|---|---|---|---|---|")
+    for label, r in results.items():
+        print(f"| {label} | " + " | ".join(f"{q['right']} / {q['wrong']}" for q in r["by_score_quartile"]) + " |")
+    print("\nright matches by the pair's scale change:\n")
+    bands = [f"{lo:g}-{hi:g}x" for lo, hi in SCALE_BANDS]
+    print("| method | " + " | ".join(bands) + " |\n|---|" + "---|" * len(bands))
+    for label, r in results.items():
+        print(f"| {label} | " + " | ".join(f"{b['right']} ({b['pairs']} pairs)" for b in r["by_scale"]) + " |")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(
+            json.dumps({"scene": str(args.scene), "runs": [str(r) for r in args.runs], "results": results}, indent=1)
+        )
+
+
+if __name__ == "__main__":
+    main()
