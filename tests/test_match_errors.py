@@ -1,0 +1,66 @@
+"""scripts/match_errors.py: putative matches judged against the reference poses, exactly."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+pytest.importorskip("pycolmap")
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "match_errors.py"
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("match_errors", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _rotation(deg: float) -> np.ndarray:
+    a = np.deg2rad(deg)
+    return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+
+
+def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path):
+    me = _script()
+    rng = np.random.default_rng(0)
+    camera = {"model": "PINHOLE", "width": 640, "height": 480, "params": [500.0, 500.0, 320.0, 240.0]}
+    poses = {"a": (np.eye(3), np.zeros(3)), "b": (_rotation(10), np.array([-1.0, 0.0, 0.2]))}
+    scene = tmp_path / "scene"
+    scene.mkdir()
+    (scene / "reference.json").write_text(
+        json.dumps(
+            {
+                "cameras": {n: camera for n in poses},
+                "images": {n: {"R": r.tolist(), "t": t.tolist()} for n, (r, t) in poses.items()},
+            }
+        )
+    )
+    world = np.c_[rng.uniform(-2, 2, (200, 2)), rng.uniform(6, 10, 200)]
+    kps = {}
+    for name, (r, t) in poses.items():
+        cam = world @ r.T + t
+        kps[name] = (500 * cam[:, :2] / cam[:, 2:] + [320, 240]).astype(np.float32)
+    run = tmp_path / "run"
+    run.mkdir()
+    matches = np.arange(200, dtype=np.int32)
+    matches[150:] = rng.permutation(matches[150:])  # 50 matches to other points: nearly all wrong
+    with h5py.File(run / "features.h5", "w") as f:
+        for name in poses:
+            f[f"{name}.png/keypoints"] = kps[name]
+            f[f"{name}.png/scores"] = np.linspace(0, 1, 200, dtype=np.float32)
+    with h5py.File(run / "matches.h5", "w") as f:
+        f["a.png/b.png/matches0"] = matches
+    cameras, reference = me.reference_geometry(scene)
+    found = me.putative_matches(run, cameras, reference)
+    errors = found["pairs"][("a", "b")][3]
+    assert np.abs(errors[:150]).max() < 1e-3  # true correspondences lie on their epipolar lines
+    assert np.mean(errors[150:] > me.WRONG_PX) > 0.8
+    summary = me.summary(found, me.pair_scales([found]))
+    assert summary["putative"] == 200 and summary["right"] >= 150
+    assert summary["by_score_quartile"][3]["wrong"] > summary["by_score_quartile"][0]["wrong"] == 0
