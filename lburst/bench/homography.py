@@ -26,6 +26,10 @@ Protocol (reproducible by anyone):
    their centre, on a canvas that holds the whole turned image (quarter turns exact,
    others bilinear with black corners), and composes the homographies with the turn:
    the views of neighbouring survey lines (180) or of crossing ones (90).
+6. ``--color-jitter B C S H`` changes the colours of images 2-6 of every sequence, each by one
+   random brightness, contrast, saturation and hue change up to those amounts
+   (:func:`lburst.bench.sequences.recolor_sequence`, seeded): photos of one place from
+   different cameras or times of day.
 
 Features are kept in the features store (:mod:`lburst.store`), one file per (method,
 noise level, sequence, image) under ``OUT/cache``, keyed as ``lburst extract`` keys them:
@@ -50,7 +54,7 @@ from tqdm import tqdm
 
 from lburst import matching, store
 from lburst.bench.metrics import THRESHOLDS, match_errors, mma, repeatability, rotation_deg
-from lburst.bench.sequences import Sequence, list_sequences, read_sequence, rotate_sequence
+from lburst.bench.sequences import Sequence, list_sequences, read_sequence, recolor_sequence, rotate_sequence
 from lburst.burst.io import atomic_path
 from lburst.burst.motion import BurstMotion, sample_motion
 from lburst.errors import LBurstOSError, LBurstValueError
@@ -58,6 +62,7 @@ from lburst.features import Features
 from lburst.methods import accepts, create, method_slug
 from lburst.methods.merge import merge_burst
 from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
+from lburst.photometric import check_jitter
 from lburst.simulate import random_motion, simulate_burst, stable_seed
 from lburst.viz import new_figure
 
@@ -278,13 +283,16 @@ def run_homography_benchmark(
     matcher: str = "mnn",
     every: int = 1,
     rotation: float = 0.0,
+    color_jitter: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
 ) -> dict:
     """Run the protocol, matching with the ``matcher`` spec; write ``results.json``, ``results.md`` and ``mma.png`` in ``out``.
     ``every`` > 1 keeps every ``every``-th sequence in name order (the first, the ``every + 1``-th, ...);
     ``rotation`` turns images 2-6 of every sequence in-plane by that many degrees
-    (:func:`lburst.bench.sequences.rotate_sequence`)."""
+    (:func:`lburst.bench.sequences.rotate_sequence`); ``color_jitter`` changes their colours
+    (:func:`lburst.bench.sequences.recolor_sequence`)."""
     out = Path(out)
     match = matching.create(matcher)
+    color_jitter = check_jitter(color_jitter)
     if not isinstance(every, int) or every < 1:
         raise LBurstValueError(f"every must be an integer >= 1, got {every!r}")
     folders = list_sequences(data)[::every]
@@ -302,11 +310,14 @@ def run_homography_benchmark(
             "burst_motion": asdict(motion),
             "matcher": matcher,
             "rotation_deg": float(rotation),
+            "color_jitter": list(color_jitter),
         },
         "methods": {},
     }
     bar = tqdm(total=len(levels) * len(folders) * len(methods) * 6, desc="homography bench", disable=not progress)
-    sequences = {f.name: rotate_sequence(read_sequence(f, max_side), rotation) for f in folders}
+    sequences = {
+        f.name: rotate_sequence(recolor_sequence(read_sequence(f, max_side), color_jitter), rotation) for f in folders
+    }
     paths = {f.name: f for f in folders}
     kinds = {name: seq.kind for name, seq in sequences.items()}
     for spec, runner in runners.items():
@@ -358,6 +369,14 @@ def markdown(results: dict) -> str:
     turn = results["protocol"].get("rotation_deg", 0.0)
     if turn:
         lines += [f"Images 2-6 turned by {turn:g} degrees.", ""]
+    jitter = results["protocol"].get("color_jitter") or [0.0] * 4
+    if any(jitter):
+        lines += [
+            "Images 2-6 recoloured (brightness, contrast, saturation, hue up to "
+            + ", ".join(f"{v:g}" for v in jitter)
+            + ").",
+            "",
+        ]
     for level in levels:
         first = methods[next(iter(methods))][level]["summary"]
         for part, title in (

@@ -12,7 +12,9 @@ import numpy as np
 
 from lburst.burst.io import IMAGE_SUFFIXES, BurstError, read_image, to_uint8
 from lburst.errors import LBurstFileNotFoundError, LBurstValueError
+from lburst.photometric import color_jitter
 from lburst.rotation import rotate_image
+from lburst.simulate import stable_seed
 
 
 @dataclass
@@ -103,6 +105,20 @@ def rotate_sequence(seq: Sequence, deg: float) -> Sequence:
         [seq.images[0], *(im for im, _ in turned)],
         [m @ h for (_, m), h in zip(turned, seq.homographies)],
     )
+
+
+def recolor_sequence(seq: Sequence, jitter: tuple[float, float, float, float]) -> Sequence:
+    """``seq`` with images 2-6 each changed in colour (:func:`lburst.photometric.color_jitter`,
+    seeded by the sequence's name and the image's number, the same in every run)."""
+    if not any(jitter):
+        return seq
+    changed = [
+        np.round(color_jitter(im, np.random.default_rng(stable_seed(seq.name, k, "color", *jitter)), jitter)).astype(
+            np.uint8
+        )
+        for k, im in enumerate(seq.images[1:], start=2)
+    ]
+    return Sequence(seq.name, [seq.images[0], *changed], seq.homographies)
 
 
 def list_sequences(data: str | Path) -> list[Path]:

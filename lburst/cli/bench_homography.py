@@ -74,6 +74,16 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="turn images 2-6 of every sequence in-plane by DEG degrees about their centre "
         "(counter-clockwise; the homographies follow): matching across rotated views",
     )
+    p.add_argument(
+        "--color-jitter",
+        type=real(0, 1),
+        nargs=4,
+        default=(0.0, 0.0, 0.0, 0.0),
+        metavar=("BRIGHTNESS", "CONTRAST", "SATURATION", "HUE"),
+        help="change the colours of images 2-6 of every sequence, each by a random brightness, contrast and "
+        "saturation factor within 1 +- these and a hue turn up to HUE of the circle (seeded): views from "
+        "other cameras or times of day (e.g. 0.2 0.2 0.2 0.1, R2D2's training jitter)",
+    )
     add_matcher_argument(p)
 
 
@@ -91,6 +101,7 @@ def main(args: argparse.Namespace) -> int:
         matcher=args.matcher,
         every=args.every,
         rotation=args.rotation,
+        color_jitter=tuple(args.color_jitter),
     )
     print(markdown(results))
     print(f"results: {args.out / 'results.json'}, {args.out / 'results.md'}, {args.out / 'mma.png'}")

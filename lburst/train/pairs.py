@@ -19,6 +19,7 @@ from lburst.burst.align import warp_frame
 from lburst.burst.motion import BurstMotion
 from lburst.errors import LBurstValueError
 from lburst.noise import IMAGENET_STD, LowLightNoise, sensor_from_spec
+from lburst.photometric import check_jitter, color_jitter
 
 #: The calibrated sensors of ``sensor_prob``: the phone-class IMX686 (a small drone's camera)
 #: at its calibrated ISO, and the full-frame A7S2 on both sides of its dual-gain switch and at
@@ -98,10 +99,7 @@ class PairConfig:
         low, high = self.scale_range
         if not 0.0 < low <= high:
             raise LBurstValueError(f"scale_range ({low:g}, {high:g}) must be a range 0 < LOW <= HIGH")
-        if len(self.color_jitter) != 4 or not all(0.0 <= v <= 1.0 for v in self.color_jitter):
-            raise LBurstValueError(
-                f"color_jitter {self.color_jitter} must be four numbers in [0, 1]: brightness, contrast, saturation, hue"
-            )
+        check_jitter(self.color_jitter)
         if not 0.0 <= self.max_tilt < 1.0:
             raise LBurstValueError(f"max_tilt {self.max_tilt:g} must lie in [0, 1)")
         if not 0.0 <= self.sensor_prob <= 1.0 - self.lowlight_prob:
@@ -181,28 +179,6 @@ def _exposure(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> 
     if rng.random() < cfg.dark_prob:
         frames = frames * rng.uniform(*cfg.dark_range)
     return frames
-
-
-#: RGB to YIQ: luma, then the two chroma axes a hue shift turns.
-_YIQ = np.array([[0.299, 0.587, 0.114], [0.596, -0.274, -0.322], [0.211, -0.523, 0.312]])
-
-
-def color_jitter(frames: np.ndarray, rng: np.random.Generator, jitter: tuple[float, float, float, float]) -> np.ndarray:
-    """The burst ``frames`` (0..255) with one random brightness, contrast, saturation and hue change
-    for all its frames: factors drawn in ``1 +- jitter[0..2]``, a hue turn of up to ``jitter[3]``
-    of the circle (in YIQ).  Clipped to 0..255."""
-    brightness, contrast, saturation, hue = jitter
-    if not any(jitter):
-        return frames
-    f_b, f_c, f_s = (rng.uniform(1 - j, 1 + j) for j in (brightness, contrast, saturation))
-    angle = 2 * np.pi * rng.uniform(-hue, hue)
-    turn = np.array([[1, 0, 0], [0, np.cos(angle), -np.sin(angle)], [0, np.sin(angle), np.cos(angle)]])
-    # YIQ: scale the luma by brightness, the chroma by saturation, turn the chroma by the hue angle
-    mix = np.linalg.inv(_YIQ) @ turn @ np.diag([f_b, f_b * f_s, f_b * f_s]) @ _YIQ
-    out = frames @ mix.T.astype(np.float32)
-    mean = float((out[len(out) // 2] @ _YIQ[0].astype(np.float32)).mean())  # the common frame's mean luma
-    out = (out - mean) * f_c + mean
-    return np.clip(out, 0, 255).astype(np.float32)
 
 
 def _noise(frames: np.ndarray, rng: np.random.Generator, cfg: PairConfig) -> np.ndarray:

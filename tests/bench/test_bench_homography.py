@@ -217,3 +217,28 @@ def test_the_command_line_input_option_runs_every_plain_spec_in_that_mode(tmp_pa
     assert "| gold+sift |" in table and "| oracle-merge+sift |" in table
     summary = json.loads((tmp_path / "out" / "results.json").read_text())["methods"]
     assert sorted(summary) == ["gold+sift", "oracle-merge+sift"]
+
+
+def test_recoloured_views_keep_the_first_image_and_the_geometry_and_repeat(tmp_path):
+    """``color_jitter`` changes images 2-6 only, the same way in every run, and leaves the
+    homographies alone: SIFT (on grey levels) still matches; a bad jitter is one clear error."""
+    from lburst.bench.sequences import read_sequence, recolor_sequence
+
+    _write_sequence(tmp_path / "data" / "seq")
+    seq = read_sequence(tmp_path / "data" / "seq")
+    jitter = (0.2, 0.2, 0.2, 0.1)
+    once, twice = recolor_sequence(seq, jitter), recolor_sequence(seq, jitter)
+    assert np.array_equal(once.images[0], seq.images[0])
+    assert all(np.array_equal(a, b) for a, b in zip(once.images, twice.images))
+    assert all(np.abs(a.astype(int) - b).mean() > 1 for a, b in zip(once.images[1:], seq.images[1:]))
+    assert all(np.array_equal(a, b) for a, b in zip(once.homographies, seq.homographies))
+    results = run_homography_benchmark(
+        tmp_path / "data", ["sift"], [0], tmp_path / "out", progress=False, color_jitter=jitter
+    )
+    assert results["methods"]["sift"]["sigma0"]["summary"]["all"]["mma"][2] > 0.8
+    assert results["protocol"]["color_jitter"] == list(jitter)
+    assert "recoloured" in (tmp_path / "out" / "results.md").read_text()
+    with pytest.raises(ValueError, match="must be four numbers in"):
+        run_homography_benchmark(
+            tmp_path / "data", ["sift"], [0], tmp_path / "out", progress=False, color_jitter=(0.2, 0.2, 2.0, 0.1)
+        )

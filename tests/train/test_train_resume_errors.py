@@ -214,7 +214,7 @@ def test_color_jitter_changes_the_second_burst_as_set_and_is_kept_by_a_resumed_r
     import numpy as np
 
     from lburst.cli.train import _check_resumed_pairs
-    from lburst.train.pairs import color_jitter
+    from lburst.photometric import color_jitter
 
     rng = np.random.default_rng(0)
     burst = rng.uniform(40, 180, (3, 16, 16, 3))  # no clipping at 1.3x.astype(np.float32)
