@@ -112,12 +112,10 @@ def recolor_sequence(seq: Sequence, jitter: tuple[float, float, float, float]) -
     seeded by the sequence's name and the image's number, the same in every run)."""
     if not any(jitter):
         return seq
-    changed = [
-        np.round(color_jitter(im, np.random.default_rng(stable_seed(seq.name, k, "color", *jitter)), jitter)).astype(
-            np.uint8
-        )
-        for k, im in enumerate(seq.images[1:], start=2)
-    ]
+    changed = []
+    for k, image in enumerate(seq.images[1:], start=2):
+        rng = np.random.default_rng(stable_seed(seq.name, k, "color", *jitter))
+        changed.append(np.round(color_jitter(image, rng, jitter)).astype(np.uint8))
     return Sequence(seq.name, [seq.images[0], *changed], seq.homographies)
 
 
