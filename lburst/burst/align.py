@@ -172,12 +172,32 @@ def pyramid_shifts(
     return shifts
 
 
-def fit_linear(shifts: np.ndarray) -> np.ndarray:
-    """Least-squares constant-velocity fit ``shifts[k] ~ t_k * (u, v)`` (through zero at the common frame)."""
+#: A frame whose shift lies further than this from a constant-velocity line (px) disagrees with it.
+AGREE_PX = 1.0
+
+
+def fit_linear(shifts: np.ndarray, agree_px: float = AGREE_PX) -> np.ndarray:
+    """Constant-velocity fit ``shifts[k] ~ t_k * (u, v)`` (through zero at the common frame).
+
+    Least squares over the frames that agree: each moving frame's own velocity ``shift / t``
+    is tried as the line, the one within ``agree_px`` of the most frames wins (the smallest
+    total distance breaks a tie), and the fit is least squares over those frames.  When every
+    frame agrees this is least squares over all of them; when no two frames agree, least
+    squares over all too.  A frame that phase correlation lost under heavy noise (tens of
+    pixels off) then no longer drags every frame's alignment with it."""
+    shifts = np.asarray(shifts, np.float64)
     t = time_offsets(len(shifts)).astype(np.float64)
-    if not np.any(t):
+    moving = t != 0
+    if not moving.any():
         return np.zeros_like(shifts)
-    velocity = (t[:, None] * shifts).sum(0) / (t**2).sum()
+    best, best_key = moving, None
+    for j in np.flatnonzero(moving):
+        distance = np.linalg.norm(shifts - t[:, None] * (shifts[j] / t[j]), axis=1)
+        agree = moving & (distance <= agree_px)
+        key = (int(agree.sum()), -float(distance[moving].sum()))
+        if agree.sum() >= 2 and (best_key is None or key > best_key):
+            best, best_key = agree, key
+    velocity = (t[best, None] * shifts[best]).sum(0) / (t[best] ** 2).sum()
     return t[:, None] * velocity[None]
 
 

@@ -187,3 +187,18 @@ def test_align_wrapper_aligns_weights_that_align_themselves_only_once(tmp_path, 
     assert len(calls) == 1
     create(f"lburst:{tmp_path / 'aligned.pt'}", device="cpu")(burst)
     assert len(calls) == 2
+
+
+def test_linear_fit_leaves_out_a_lost_frame():
+    """One frame's shift tens of pixels off (phase correlation lost under noise) no longer moves
+    the fit: the other frames agree within AGREE_PX and give the velocity; when no two frames
+    agree, the fit stays least squares over all."""
+    truth = (np.arange(5) - 2)[:, None] * np.array([0.74, -0.86])
+    lost = truth + np.array([[0.05, -0.02], [73.0, 0.9], [0, 0], [-0.03, 0.04], [0.02, 0.03]])
+    np.testing.assert_allclose(fit_linear(lost), truth, atol=0.05)
+    shifts = np.array([[-2.2, 1.0], [-1.0, 0.4], [0.0, 0.0], [0.8, -0.6], [2.0, -1.0]])
+    np.testing.assert_allclose(fit_linear(shifts), fit_linear(shifts, agree_px=1e9))  # all agree: unchanged
+    scattered = np.array([[9.0, 0.0], [0.0, 7.0], [0.0, 0.0], [-5.0, 5.0], [3.0, -8.0]])
+    t = np.arange(5) - 2
+    velocity = (t[:, None] * scattered).sum(0) / (t**2).sum()
+    np.testing.assert_allclose(fit_linear(scattered), t[:, None] * velocity)
