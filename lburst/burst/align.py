@@ -172,8 +172,10 @@ def pyramid_shifts(
     return shifts
 
 
-#: A frame whose shift lies further than this from a constant-velocity line (px) disagrees with it.
-AGREE_PX = 1.0
+#: A frame whose shift lies further than this from a constant-velocity line (px) disagrees with it:
+#: above the night flight's shake (its frames lie up to 1 px off their best line), far below a lost
+#: frame (tens of px).
+AGREE_PX = 3.0
 
 
 def fit_linear(shifts: np.ndarray, agree_px: float = AGREE_PX) -> np.ndarray:
