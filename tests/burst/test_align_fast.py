@@ -128,3 +128,24 @@ def test_align_burst_takes_non_contiguous_bursts(bursts):
     expected = align_burst(np.ascontiguousarray(flipped), TRUTH * [-1, 1])
     np.testing.assert_array_equal(align_burst(flipped, TRUTH * [-1, 1]), expected)
     np.testing.assert_array_equal(align_burst(np.asfortranarray(burst), TRUTH), align_burst(burst, TRUTH))
+
+
+def test_the_coarse_start_finds_a_shift_in_noise_that_defeats_phase_correlation():
+    """A dim, blurred texture moved by (5, -3) px, with independent noise in both images: the
+    plain cross-correlation start lands within 1 px in 16 of 20 noise draws at std 10 (OpenCV's
+    phase correlation, which weighs the noisy high frequencies alike, in 9), and exactly without
+    noise."""
+    from lburst.burst.align import coarse_shift
+
+    rng = np.random.default_rng(0)
+    base = cv2.GaussianBlur(rng.normal(0, 1, (160, 224)).astype(np.float32), (0, 0), 3) * 40 + 60
+    window = cv2.createHanningWindow((200, 136), cv2.CV_32F)
+    reference, moved = base[12:148, 12:212], base[15:151, 7:207]  # content at p in reference is at p + (5, -3)
+    np.testing.assert_allclose(coarse_shift(reference, moved, window), [5, -3], atol=0.05)
+    close = 0
+    for seed in range(20):
+        noise = np.random.default_rng(seed).normal(0, 10, (2, 136, 200)).astype(np.float32)
+        shift = coarse_shift(reference + noise[0], moved + noise[1], window)
+        close += np.abs(shift - [5, -3]).max() < 1
+    assert close >= 16
+    assert np.array_equal(coarse_shift(np.full((136, 200), 7, np.float32), moved, window), [0, 0])  # flat: no shift
