@@ -136,6 +136,11 @@ def main() -> None:
     labels = args.labels or [r.parent.name for r in args.runs]
     if len(labels) != len(args.runs):
         p.error(f"{len(args.runs)} runs but {len(labels)} labels")
+    for path in [args.scene / "reference.json"] + [
+        r / name for r in args.runs for name in ("features.h5", "matches.h5")
+    ]:
+        if not path.is_file():
+            p.error(f"{path}: no such file (a scene with reference.json, and runs of lburst bench reconstruction)")
     cameras, poses = reference_geometry(args.scene)
     runs = [putative_matches(r, cameras, poses) for r in args.runs]
     scales = pair_scales(runs)
