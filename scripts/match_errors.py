@@ -64,17 +64,19 @@ def sampson_px(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray) -
 def putative_matches(run: Path, cameras, poses) -> dict:
     """Per pair (a, b): keypoints of both sides, the lower score, and the error in px."""
     out = {}
-    with h5py.File(run / "features.h5", "r") as feats, h5py.File(run / "matches.h5", "r") as matches:
+    with h5py.File(run / "features.h5", "r") as feats:  # each image's keypoints and scores, read once
+        kps = {name: feats[name]["keypoints"][()] for name in feats}
+        scores = {name: feats[name]["scores"][()] for name in feats}
+    with h5py.File(run / "matches.h5", "r") as matches:
         for a in matches:
             for b in matches[a]:
                 m = matches[a][b]["matches0"][()]
                 i = np.flatnonzero(m >= 0)
-                ka, kb = feats[a]["keypoints"][()][i], feats[b]["keypoints"][()][m[i]]
-                score = np.minimum(feats[a]["scores"][()][i], feats[b]["scores"][()][m[i]])
+                ka, kb = kps[a][i], kps[b][m[i]]
+                score = np.minimum(scores[a][i], scores[b][m[i]])
                 na, nb = Path(a).stem, Path(b).stem
                 out[tuple(sorted((na, nb)))] = (ka, kb, score, sampson_px(cameras, poses, na, nb, ka, kb))
-        scores = np.concatenate([feats[name]["scores"][()] for name in feats])
-    return {"pairs": out, "scores": scores}
+    return {"pairs": out, "scores": np.concatenate(list(scores.values()))}
 
 
 def pair_scales(runs: list[dict]) -> dict:

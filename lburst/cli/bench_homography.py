@@ -7,7 +7,7 @@ from pathlib import Path
 
 from lburst.bench.homography import BenchMethod, InputMode, MotionRange, markdown, run_homography_benchmark
 from lburst.cli.numbers import integer, real
-from lburst.cli.options import add_matcher_argument
+from lburst.cli.options import add_color_jitter_argument, add_matcher_argument
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -74,12 +74,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="turn images 2-6 of every sequence in-plane by DEG degrees about their centre "
         "(counter-clockwise; the homographies follow): matching across rotated views",
     )
-    p.add_argument(
-        "--color-jitter",
-        type=real(0, 1),
-        nargs=4,
+    add_color_jitter_argument(
+        p,
         default=(0.0, 0.0, 0.0, 0.0),
-        metavar=("BRIGHTNESS", "CONTRAST", "SATURATION", "HUE"),
         help="change the colours of images 2-6 of every sequence, each by a random brightness, contrast and "
         "saturation factor within 1 +- these and a hue turn up to HUE of the circle (seeded): views from "
         "other cameras or times of day (e.g. 0.2 0.2 0.2 0.1, R2D2's training jitter)",

@@ -90,6 +90,19 @@ def add_matcher_argument(parser) -> None:
     )
 
 
+def add_color_jitter_argument(parser, help: str, default: tuple[float, ...] | None = None) -> None:
+    """``--color-jitter BRIGHTNESS CONTRAST SATURATION HUE``, four numbers in [0, 1]
+    (:func:`lburst.photometric.color_jitter`), for training and the homography benchmark."""
+    parser.add_argument(
+        "--color-jitter",
+        type=real(0, 1),
+        nargs=4,
+        default=default,
+        metavar=("BRIGHTNESS", "CONTRAST", "SATURATION", "HUE"),
+        help=help,
+    )
+
+
 def add_cluster_argument(p, what: str) -> None:
     """``--cluster local:N | tcp://HOST:PORT``: run ``what`` on a cluster (:mod:`lburst.cluster`); the
     command reads it with :func:`lburst.cluster.spec.parse_cluster` before any work, so that a bad

@@ -10,6 +10,7 @@ from dataclasses import fields, replace
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
+from lburst.cli.options import add_color_jitter_argument
 from lburst.errors import LBurstValueError
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.paths import shared_dir
@@ -98,11 +99,8 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="largest perspective tilt between the two bursts: one edge of the crop shrinks and the opposite "
         "one grows by up to this fraction of its length (presets: 0.15)",
     )
-    p.add_argument(
-        "--color-jitter",
-        type=real(0, 1),
-        nargs=4,
-        metavar=("BRIGHTNESS", "CONTRAST", "SATURATION", "HUE"),
+    add_color_jitter_argument(
+        p,
         help="largest colour change of a pair's second burst against its first: relative brightness, contrast "
         "and saturation, and hue as a fraction of the colour circle (presets: 0 0 0 0; R2D2: 0.2 0.2 0.2 0.1)",
     )
