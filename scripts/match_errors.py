@@ -10,7 +10,9 @@ pixels.  Tables, one row per method:
 - by keypoint score: right and wrong matches among the keypoints of each score quartile of
   the method's own keypoints (a match's score: the lower of its two keypoints');
 - by scale change: right matches summed over the pairs whose scale change (a similarity
-  fitted to the right matches of all methods together) lies in each band.
+  fitted to the right matches of all methods together) lies in each band;
+- by gap (a sequence: a flight, a walk): right matches, and those under 1 px, summed over the
+  pairs that lie 1, 2, ... images apart in name order, the baseline growing with the gap.
 
     python scripts/match_errors.py outputs/scenes/sacre_coeur_g50 \
         outputs/recon_seeds_g50/lburst_*/sacre_coeur_g50 outputs/recon_seeds_g50/B5.pt*/sacre_coeur_g50 \
@@ -41,9 +43,10 @@ def skew(v: np.ndarray) -> np.ndarray:
 def reference_geometry(scene: Path):
     """Cameras (pycolmap) and world-to-camera poses (R, t) by image name."""
     ref = json.loads((scene / "reference.json").read_text())
+    per_image = ref.get("cameras") or {name: ref["camera"] for name in ref["images"]}  # a synthetic scene: one
     cameras = {
         name: pycolmap.Camera(model=c["model"], width=c["width"], height=c["height"], params=c["params"])
-        for name, c in ref["cameras"].items()
+        for name, c in per_image.items()
     }
     poses = {name: (np.array(p["R"]), np.array(p["t"])) for name, p in ref["images"].items()}
     return cameras, poses
@@ -95,7 +98,19 @@ def pair_scales(runs: list[dict]) -> dict:
     return scales
 
 
-def summary(run: dict, scales: dict) -> dict:
+def by_gap(run: dict, order: list[str]) -> dict:
+    """Right matches (and those under 1 px) summed over the pairs ``gap`` images apart in ``order``."""
+    rank = {name: i for i, name in enumerate(order)}
+    gaps: dict[int, dict] = {}
+    for (a, b), (_, _, _, errors) in sorted(run["pairs"].items()):
+        row = gaps.setdefault(abs(rank[a] - rank[b]), {"pairs": 0, "right": 0, "under_1px": 0})
+        row["pairs"] += 1
+        row["right"] += int(np.sum(errors < RIGHT_PX))
+        row["under_1px"] += int(np.sum(errors < 1.0))
+    return {str(g): gaps[g] for g in sorted(gaps)}
+
+
+def summary(run: dict, scales: dict, order: list[str]) -> dict:
     errors = np.concatenate([p[3] for p in run["pairs"].values()])
     score = np.concatenate([p[2] for p in run["pairs"].values()])
     edges = np.quantile(run["scores"], [0, 0.25, 0.5, 0.75, 1])
@@ -125,6 +140,7 @@ def summary(run: dict, scales: dict) -> dict:
             for q in range(4)
         ],
         "by_scale": by_scale,
+        "by_gap": by_gap(run, order),
     }
 
 
@@ -146,7 +162,8 @@ def main() -> None:
     cameras, poses = reference_geometry(args.scene)
     runs = [putative_matches(r, cameras, poses) for r in args.runs]
     scales = pair_scales(runs)
-    results = {label: summary(run, scales) for label, run in zip(labels, runs)}
+    order = sorted(poses)
+    results = {label: summary(run, scales, order) for label, run in zip(labels, runs)}
 
     print(
         "| method | putative | <0.5 px | <1 px | <2 px | <4 px (right) | >8 px (wrong) |\n|---|---|---|---|---|---|---|"
@@ -163,6 +180,12 @@ def main() -> None:
     print("| method | " + " | ".join(bands) + " |\n|---|" + "---|" * len(bands))
     for label, r in results.items():
         print(f"| {label} | " + " | ".join(f"{b['right']} ({b['pairs']} pairs)" for b in r["by_scale"]) + " |")
+    gaps = sorted({g for r in results.values() for g in r["by_gap"]}, key=int)
+    print("\nright matches (under 1 px) by the pair's gap in name order, for a sequence:\n")
+    print("| method | " + " | ".join(gaps) + " |\n|---|" + "---|" * len(gaps))
+    for label, r in results.items():
+        cells = [r["by_gap"].get(g, {"right": 0, "under_1px": 0}) for g in gaps]
+        print(f"| {label} | " + " | ".join(f"{c['right']} ({c['under_1px']})" for c in cells) + " |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(

@@ -26,21 +26,17 @@ def _rotation(deg: float) -> np.ndarray:
     return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
 
 
-def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path):
+@pytest.mark.parametrize("layout", ["per_image", "shared"])  # a photo set's cameras; a synthetic flight's one
+def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path, layout):
     me = _script()
     rng = np.random.default_rng(0)
     camera = {"model": "PINHOLE", "width": 640, "height": 480, "params": [500.0, 500.0, 320.0, 240.0]}
     poses = {"a": (np.eye(3), np.zeros(3)), "b": (_rotation(10), np.array([-1.0, 0.0, 0.2]))}
     scene = tmp_path / "scene"
     scene.mkdir()
-    (scene / "reference.json").write_text(
-        json.dumps(
-            {
-                "cameras": {n: camera for n in poses},
-                "images": {n: {"R": r.tolist(), "t": t.tolist()} for n, (r, t) in poses.items()},
-            }
-        )
-    )
+    cameras = {"cameras": {n: camera for n in poses}} if layout == "per_image" else {"camera": camera}
+    images = {n: {"R": r.tolist(), "t": t.tolist()} for n, (r, t) in poses.items()}
+    (scene / "reference.json").write_text(json.dumps({**cameras, "images": images}))
     world = np.c_[rng.uniform(-2, 2, (200, 2)), rng.uniform(6, 10, 200)]
     kps = {}
     for name, (r, t) in poses.items():
@@ -61,6 +57,8 @@ def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path):
     errors = found["pairs"][("a", "b")][3]
     assert np.abs(errors[:150]).max() < 1e-3  # true correspondences lie on their epipolar lines
     assert np.mean(errors[150:] > me.WRONG_PX) > 0.8
-    summary = me.summary(found, me.pair_scales([found]))
+    summary = me.summary(found, me.pair_scales([found]), ["a", "b"])
     assert summary["putative"] == 200 and summary["right"] >= 150
+    assert summary["by_gap"]["1"]["pairs"] == 1 and summary["by_gap"]["1"]["right"] == summary["right"]
+    assert 150 <= summary["by_gap"]["1"]["under_1px"] <= summary["right"]
     assert summary["by_score_quartile"][3]["wrong"] > summary["by_score_quartile"][0]["wrong"] == 0
