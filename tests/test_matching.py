@@ -213,3 +213,26 @@ def test_binary_mnn_by_opencv_equals_the_argmin_one_ties_included(width):
             expected = argmin_mutual(a, b, max_distance)
             np.testing.assert_array_equal(hamming_mutual_nearest_neighbours(a, b, max_distance), expected)
             np.testing.assert_array_equal(mutual_nearest_neighbours(a, b, max_distance), expected)
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 4096])
+def test_blockwise_nearest_neighbours_equal_the_full_distance_matrix_ties_included(chunk):
+    """:func:`lburst.match.nearest_both_ways` against the argmin of every L2 distance: float
+    descriptors of unequal norms, and exact duplicates whose first copy must win both ways."""
+    import torch
+
+    from lburst.match import nearest_both_ways
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(60, 8)).astype(np.float32) * rng.uniform(0.5, 2, (60, 1)).astype(np.float32)
+    b = rng.normal(size=(45, 8)).astype(np.float32)
+    b[[10, 30]] = a[5]  # a[5]'s two equally near copies in b: the first, 10
+    a[[40, 50]] = b[3]  # b[3]'s two equally near copies in a: the first, 40
+    dist = np.linalg.norm(a[:, None].astype(np.float64) - b[None], axis=2)
+    nn_ab, nn_ba = nearest_both_ways(torch.from_numpy(a), torch.from_numpy(b), chunk)
+    np.testing.assert_array_equal(nn_ab.numpy(), dist.argmin(1))
+    np.testing.assert_array_equal(nn_ba.numpy(), dist.argmin(0))
+    assert nn_ab[5] == 10 and nn_ba[3] == 40
+    got = mutual_nearest_neighbours(a, b, max_distance=2.5)
+    mutual = [[i, int(j)] for i, j in enumerate(dist.argmin(1)) if dist[:, j].argmin() == i and dist[i, j] <= 2.5]
+    assert got.tolist() == mutual
