@@ -15,7 +15,12 @@ from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenes", nargs="+", help="scene folders (see lburst reconstruct)")
-    parser.add_argument("--methods", nargs="+", default=["sift", "merge+sift", "lburst"], help="method specs")
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        default=["sift", "merge+sift", "lburst"],
+        help="method specs (a learned method keeps 8000 keypoints per image unless the spec sets top_k=N)",
+    )
     parser.add_argument("--out", required=True, help="output folder: OUT/<method>/<scene>/, table.md, results.json")
     parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto")
     parser.add_argument(

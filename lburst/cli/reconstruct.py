@@ -33,7 +33,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "any folder of frames",
     )
     parser.add_argument(
-        "--method", default="lburst", help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...)"
+        "--method",
+        default="lburst",
+        help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...); a learned method keeps 8000"
+        " keypoints per image of a scene and 4000 of a recording unless the spec sets top_k=N",
     )
     parser.add_argument("--out", required=True, help="output folder (features cache, COLMAP files, result.json)")
     parser.add_argument(

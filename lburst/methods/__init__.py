@@ -188,6 +188,16 @@ def accepts(spec: str, option: str) -> bool:
     return options is not None and option in options.__dataclass_fields__
 
 
+def with_default(spec: str, option: str, value: Any) -> str:
+    """``spec`` with ``option=value`` for the method it runs on the burst (inside any wrappers),
+    where that method has ``option`` and ``spec`` does not set it: a default that depends on
+    the input (:attr:`lburst.sfm.inputs.InputSource.keypoints`).  Otherwise, or with ``value``
+    ``None``, ``spec`` itself."""
+    if value is None or not accepts(spec, option) or option in _innermost(parse_spec(spec)).options:
+        return spec
+    return f"{spec},{option}={value}"  # the innermost method's options end the spec
+
+
 def weights_file(spec: str) -> Path | None:
     """The checkpoint file that ``spec`` loads (inside any wrappers), or ``None``."""
     inner = _innermost(parse_spec(spec))

@@ -11,8 +11,9 @@ the store's key of its features, which the source decides), :attr:`InputSource.f
 ``lburst extract --out DIR`` puts its features, under ``DIR``), :meth:`InputSource.finish`
 (its scene, once read) and the defaults it gives a reconstruction: ``time_ordered`` (a
 recording's keyframes come in time order: sequential pairs with loop candidates,
-:func:`lburst.sfm.pairs.pair_plan`) and ``one_camera`` (one camera shot it: one COLMAP camera
-by default, :mod:`lburst.sfm.cameras`).  :meth:`InputSource.read` runs the features stage
+:func:`lburst.sfm.pairs.pair_plan`), ``one_camera`` (one camera shot it: one COLMAP camera
+by default, :mod:`lburst.sfm.cameras`) and ``keypoints`` (a learned method's ``top_k``
+where the spec sets none).  :meth:`InputSource.read` runs the features stage
 (:func:`lburst.sfm.feature_stage.keyframe_features`) over any source; every input leaves the
 same files: ``OUT/images/``, the features, ``OUT/keyframes.json`` (times) and
 ``OUT/reference.json`` when there is a reference.
@@ -39,6 +40,11 @@ from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import IMAGES, copy_reference, write_scene_times
 from lburst.sfm.result import ReconstructionError
 from lburst.sfm.scene import Scene, SceneItem, list_scene, load_item
+
+#: keypoints per image for a scene: its views lie farther apart than a recording's keyframes,
+#: and twice the 4,000 gave lburst-b5 75-140 % more 3D points on the photo sets at the same
+#: pose error (docs/defaults.md); a recording keeps 4,000, a quarter of the matching time
+PHOTO_SET_KEYPOINTS = 8000
 
 #: ``stored(name, key)``: whether the features of ``name`` are stored under ``key``
 Stored = Callable[[str, Any], bool]
@@ -72,6 +78,9 @@ class InputSource(ABC):
 
     time_ordered = False
     one_camera = False
+    #: keypoints per image of a learned method whose spec sets no ``top_k`` (``None``: the
+    #: method's own default, 4,000)
+    keypoints: int | None = None
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -138,6 +147,8 @@ class BurstInput(InputSource):
 
 class SceneInput(InputSource):
     """A folder of bursts or photos (:func:`lburst.sfm.scene.list_scene`), timed by index."""
+
+    keypoints = PHOTO_SET_KEYPOINTS
 
     def __init__(self, path: str | Path):
         super().__init__(path)

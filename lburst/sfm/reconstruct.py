@@ -30,6 +30,7 @@ import numpy as np
 
 from lburst.burst.io import atomic_path, check_output_outside
 from lburst.cluster.runner import Runner, open_runner
+from lburst.methods import with_default
 from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
 from lburst.sfm.feature_stage import utf8
@@ -77,6 +78,8 @@ def _reconstruct(
     scene_dir: str | Path, method_spec: str, out_dir: str | Path, opts: ReconstructOptions, extractor, runner: Runner
 ) -> ReconstructionResult:
     source = open_input(scene_dir, opts.recording)  # the one question about the kind of input
+    if extractor is None:  # a given extractor keeps its own top_k
+        method_spec = with_default(method_spec, "top_k", source.keypoints)
     if opts.positions is not None:
         parse_positions(opts.positions)  # a bad file is refused before the features are computed
     if opts.single_camera is None:  # one camera shot a recording; a scene's photos may come from several

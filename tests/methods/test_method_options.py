@@ -156,3 +156,16 @@ def test_shipped_names_work_where_a_checkpoint_file_is_expected(tmp_path):
 
     assert main(["export", "onnx", "lburst-b5-lite", "--out", str(tmp_path / "lite.onnx")]) == 0
     assert (tmp_path / "lite.onnx").stat().st_size > 100_000
+
+
+def test_with_default_sets_an_option_the_spec_leaves_unset():
+    """An input's default (``top_k`` of a scene) reaches the method that runs on the burst,
+    inside a wrapper too, and never overrides what the spec says or a method without it."""
+    from lburst.methods import with_default
+
+    assert with_default("lburst", "top_k", 8000) == "lburst,top_k=8000"
+    assert create(with_default("lburst", "top_k", 8000)).top_k == 8000
+    assert create(with_default("merge+lburst", "top_k", 8000)).inner.top_k == 8000
+    assert with_default("lburst,top_k=2000", "top_k", 8000) == "lburst,top_k=2000"
+    assert with_default("lburst", "top_k", None) == "lburst"
+    assert with_default("sift", "top_k", 8000) == "sift"

@@ -99,3 +99,28 @@ def test_reading_a_scene_shows_a_bar_over_its_bursts_only_when_asked(tmp_path, c
     assert "features" not in capsys.readouterr().err
     keyframes = source.read("sift", tmp_path / "loud", ReconstructOptions(progress=True))
     assert "features: " in capsys.readouterr().err and len(keyframes.features) == 2
+
+
+def test_a_scene_keeps_8000_keypoints_unless_the_spec_says_otherwise(tmp_path):
+    """A scene's photos lie farther apart than a recording's keyframes: a learned method whose
+    spec sets no ``top_k`` keeps :data:`PHOTO_SET_KEYPOINTS` there (the key of its stored
+    features says so), a recording its method's own 4,000, and a spec's ``top_k`` wins."""
+    import cv2
+
+    from lburst.model.network import LBurstNet, NetConfig, save_checkpoint
+    from lburst.sfm import reconstruct_scene
+    from lburst.sfm.inputs import PHOTO_SET_KEYPOINTS
+
+    assert SceneInput.keypoints == PHOTO_SET_KEYPOINTS == 8000 and RecordingInput.keypoints is None
+    ckpt = tmp_path / "w.pt"
+    save_checkpoint(LBurstNet(NetConfig(frames=1)), ckpt)
+    scene = tmp_path / "scene"
+    scene.mkdir()
+    for i in range(2):
+        image = np.random.default_rng(i).integers(0, 256, size=(96, 128, 3), dtype=np.uint8)
+        cv2.imwrite(str(scene / f"{i}.png"), image)
+    for spec, top_k in ((f"r2d2:{ckpt}", "8000"), (f"r2d2:{ckpt},top_k=50", "50")):
+        out = tmp_path / f"out{top_k}"
+        reconstruct_scene(scene, spec, out, ReconstructOptions(progress=False))
+        meta = store.read_meta(out / "features" / "0.npz")
+        assert meta["key"]["method"] == store.method_key(f"r2d2:{ckpt},top_k={top_k}"), meta["key"]["method"]
