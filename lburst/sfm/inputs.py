@@ -42,8 +42,9 @@ from lburst.sfm.result import ReconstructionError
 from lburst.sfm.scene import Scene, SceneItem, list_scene, load_item
 
 #: keypoints per image for a scene: its views lie farther apart than a recording's keyframes,
-#: and twice the 4,000 gave lburst-b5 75-140 % more 3D points on the photo sets at the same
-#: pose error (docs/defaults.md); a recording keeps 4,000, a quarter of the matching time
+#: and twice the 4,000 gave lburst-b5 75-140 % more 3D points on the photo sets, the pose error
+#: within the spread of COLMAP's seeds (docs/defaults.md); a recording keeps 4,000, a quarter of
+#: the matching time
 PHOTO_SET_KEYPOINTS = 8000
 
 #: ``stored(name, key)``: whether the features of ``name`` are stored under ``key``
