@@ -42,7 +42,7 @@ from lburst.sfm.result import ReconstructionError
 from lburst.sfm.scene import Scene, SceneItem, list_scene, load_item
 
 #: keypoints per image for a scene: its views lie farther apart than a recording's keyframes,
-#: and twice the 4,000 gave lburst-b5 75-140 % more 3D points on the photo sets, the pose error
+#: and twice the 4,000 gave lburst-b5 60-145 % more 3D points on the photo sets, the pose error
 #: within the spread of COLMAP's seeds (docs/defaults.md); a recording keeps 4,000, a quarter of
 #: the matching time
 PHOTO_SET_KEYPOINTS = 8000
