@@ -101,13 +101,15 @@ def mutual_nearest_neighbours(
         return hamming_mutual_nearest_neighbours(desc_a, desc_b, max_distance)
     a = torch.from_numpy(np.ascontiguousarray(desc_a)).to(device)
     b = torch.from_numpy(np.ascontiguousarray(desc_b)).to(device)
+    ia = torch.arange(len(a), device=a.device)
     if binary:
         dist = _distances(a, b, binary)
         nn_ab, nn_ba = dist.argmin(1), dist.argmin(0)
     else:
-        nn_ab, nn_ba = nearest_both_ways(a.float(), b.float())
-    ia = torch.arange(len(a), device=a.device)
+        a, b = a.float(), b.float()
+        nn_ab, nn_ba = nearest_both_ways(a, b)
     keep = nn_ba[nn_ab] == ia
-    if max_distance is not None:
-        keep &= torch.linalg.vector_norm(a.float() - b.float()[nn_ab], dim=1) <= max_distance
+    if max_distance is not None:  # Hamming bits or L2, as the nearest were found
+        apart = dist[ia, nn_ab] if binary else torch.linalg.vector_norm(a - b[nn_ab], dim=1)
+        keep &= apart <= max_distance
     return torch.stack([ia[keep], nn_ab[keep]], 1).cpu().numpy()

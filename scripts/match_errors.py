@@ -30,6 +30,10 @@ import h5py
 import numpy as np
 import pycolmap
 
+from lburst.errors import LBurstValueError
+from lburst.sfm.reference import Reference
+from lburst.sfm.scene import reference_cameras
+
 RIGHT_PX, WRONG_PX = 4.0, 8.0
 ERROR_EDGES = (0.5, 1.0, 2.0, 4.0)
 SCALE_BANDS = ((1.0, 1.2), (1.2, 1.5), (1.5, np.inf))
@@ -42,14 +46,12 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 def reference_geometry(scene: Path):
     """Cameras (pycolmap) and world-to-camera poses (R, t) by image name."""
-    ref = json.loads((scene / "reference.json").read_text())
-    per_image = ref.get("cameras") or {name: ref["camera"] for name in ref["images"]}  # a synthetic scene: one
-    cameras = {
+    path = scene / "reference.json"
+    cameras = {  # per-image cameras (a photo set) or the one camera (a synthetic flight)
         name: pycolmap.Camera(model=c["model"], width=c["width"], height=c["height"], params=c["params"])
-        for name, c in per_image.items()
+        for name, c in reference_cameras(path).items()
     }
-    poses = {name: (np.array(p["R"]), np.array(p["t"])) for name, p in ref["images"].items()}
-    return cameras, poses
+    return cameras, Reference.load(path).poses
 
 
 def sampson_px(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray) -> np.ndarray:
@@ -102,7 +104,7 @@ def by_gap(run: dict, order: list[str]) -> dict:
     """Right matches (and those under 1 px) summed over the pairs ``gap`` images apart in ``order``."""
     rank = {name: i for i, name in enumerate(order)}
     gaps: dict[int, dict] = {}
-    for (a, b), (_, _, _, errors) in sorted(run["pairs"].items()):
+    for (a, b), (_, _, _, errors) in run["pairs"].items():
         row = gaps.setdefault(abs(rank[a] - rank[b]), {"pairs": 0, "right": 0, "under_1px": 0})
         row["pairs"] += 1
         row["right"] += int(np.sum(errors < RIGHT_PX))
@@ -159,7 +161,10 @@ def main() -> None:
     ]:
         if not path.is_file():
             p.error(f"{path}: no such file (a scene with reference.json, and runs of lburst bench reconstruction)")
-    cameras, poses = reference_geometry(args.scene)
+    try:
+        cameras, poses = reference_geometry(args.scene)
+    except LBurstValueError as err:
+        p.error(str(err))
     runs = [putative_matches(r, cameras, poses) for r in args.runs]
     scales = pair_scales(runs)
     order = sorted(poses)

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import importlib.util
-import json
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+
+from lburst.sfm.reference import Reference
+from lburst.sfm.scene import save_reference
 
 pytest.importorskip("pycolmap")
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "match_errors.py"
@@ -34,9 +36,8 @@ def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path, layout)
     poses = {"a": (np.eye(3), np.zeros(3)), "b": (_rotation(10), np.array([-1.0, 0.0, 0.2]))}
     scene = tmp_path / "scene"
     scene.mkdir()
-    cameras = {"cameras": {n: camera for n in poses}} if layout == "per_image" else {"camera": camera}
-    images = {n: {"R": r.tolist(), "t": t.tolist()} for n, (r, t) in poses.items()}
-    (scene / "reference.json").write_text(json.dumps({**cameras, "images": images}))
+    per_image = {n: camera for n in poses} if layout == "per_image" else None
+    save_reference(Reference("sift-clean", camera, poses), scene / "reference.json", per_image)
     world = np.c_[rng.uniform(-2, 2, (200, 2)), rng.uniform(6, 10, 200)]
     kps = {}
     for name, (r, t) in poses.items():
