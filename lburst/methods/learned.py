@@ -63,6 +63,7 @@ class LearnedOptions:
     precision: str = MultiScaleConfig.precision
     whiten: bool = MultiScaleConfig.whiten
     pad: int | None = MultiScaleConfig.pad
+    subpixel: bool = MultiScaleConfig.subpixel
     rotations: int = 1
     spread: int = 0
 
@@ -95,6 +96,7 @@ class LearnedOptions:
                 "precision",
                 "whiten",
                 "pad",
+                "subpixel",
             )
         }
 

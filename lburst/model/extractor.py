@@ -55,7 +55,8 @@ class MultiScaleConfig:
         min_size: smallest long side of a pyramid level, in pixels.
         max_size: largest long side of a pyramid level, in pixels.
         scale_factor: ratio between consecutive levels.
-        min_scale, max_scale: bounds on the level's scale relative to the input.
+        min_scale, max_scale: bounds on the level's scale relative to the input (at most 1:
+            the pyramid starts at the input's size, as the published code's does).
         rel_thr, rep_thr: reliability and repeatability thresholds for keypoints.
         top_k: keep the best ``top_k`` keypoints by score (``None``: all).
         published_coordinates: map level coordinates as the published code does
@@ -74,6 +75,10 @@ class MultiScaleConfig:
             the outer 16 px; with 32 px they cover it as the published model does, at about
             15 % more time and with mixed results in 3D (docs/results.md, "A reflected border
             at extraction").
+        subpixel: move each keypoint to the vertex of a parabola through its repeatability
+            peak and the two neighbours, along x and along y (:func:`subpixel_offsets`),
+            instead of keeping the level's pixel centre, which is up to 2 px off at a
+            quarter-size level.  Descriptors stay those of the peak's pixel.
     """
 
     min_size: int = 256
@@ -89,6 +94,7 @@ class MultiScaleConfig:
     precision: str = "fp32"
     whiten: bool = False
     pad: int | None = None
+    subpixel: bool = False
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field for any value outside its range (every use of
@@ -107,11 +113,11 @@ class MultiScaleConfig:
             _is_real(self.min_scale)
             and _is_real(self.max_scale)
             and 0 <= self.min_scale <= self.max_scale
-            and self.max_scale > 0
-            and self.max_scale < float("inf")
+            and 0 < self.max_scale <= 1
         ):
             raise LBurstValueError(
-                f"scales must satisfy 0 <= min_scale <= max_scale, max_scale > 0; "
+                f"scales must satisfy 0 <= min_scale <= max_scale, 0 < max_scale <= 1 (no level is "
+                f"larger than the input: resize the burst to extract above it); "
                 f"got {self.min_scale!r}, {self.max_scale!r}"
             )
         for name in ("rel_thr", "rep_thr"):
@@ -122,7 +128,7 @@ class MultiScaleConfig:
             check_pad(self.pad)
         if self.top_k is not None and (not _is_int(self.top_k) or self.top_k < 0):
             raise LBurstValueError(f"top_k must be an integer >= 0 or None, got {self.top_k!r}")
-        for name in ("published_coordinates", "fast", "whiten"):
+        for name in ("published_coordinates", "fast", "whiten", "subpixel"):
             if not isinstance(getattr(self, name), bool):
                 raise LBurstValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         autocast_dtype(self.precision)
@@ -176,6 +182,28 @@ def _local_maxima(
     h, w = maxima.shape[-2:]
     yx = maxima[0, 0, pad : h - pad, pad : w - pad].nonzero() + pad
     return yx[:, 0], yx[:, 1]
+
+
+def subpixel_offsets(rep: torch.Tensor, y: torch.Tensor, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Sub-pixel offsets ``(dy, dx)`` of the peaks of ``rep`` (1,1,h,w) at integer ``(y, x)``:
+    the vertex of a parabola through each peak and its two neighbours, along each axis
+    (as SIFT's and Harris' detectors refine their extrema), clipped to half a pixel.  An axis
+    whose neighbour falls outside the map, or whose three samples are not concave, keeps 0."""
+    h, w = rep.shape[-2:]
+    r = rep[0, 0].float()
+    offsets = []
+    for along, size in ((0, h), (1, w)):
+        pos = (y, x)[along]
+        inside = (pos > 0) & (pos < size - 1)
+        lo, hi = (pos - 1).clamp(min=0), (pos + 1).clamp(max=size - 1)
+        before = r[lo, x] if along == 0 else r[y, lo]
+        after = r[hi, x] if along == 0 else r[y, hi]
+        centre = r[y, x]
+        curvature = before - 2 * centre + after
+        concave = inside & (curvature < 0)
+        step = torch.where(concave, (before - after) / (2 * curvature.where(concave, -1.0)), 0.0)
+        offsets.append(step.clamp(-0.5, 0.5))
+    return offsets[0], offsets[1]
 
 
 def _layout(x: torch.Tensor) -> torch.memory_format:
@@ -708,11 +736,12 @@ class LBurst:
                         desc = descriptors_at(half[b : b + 1], y, xx, stride)
                     else:
                         desc = out["descriptors"][b, :, y, xx].t()
-                    y, xx = y - pad, xx - pad
+                    fy, fx = subpixel_offsets(rep[b : b + 1], y, xx) if cfg.subpixel else (0.0, 0.0)
+                    y, xx = y.float() - pad + fy, xx.float() - pad + fx
                     if cfg.published_coordinates:
-                        px, py = xx.float() * width / w, y.float() * height / h
+                        px, py = xx * width / w, y * height / h
                     else:
-                        px, py = (xx.float() + 0.5) * (width / w) - 0.5, (y.float() + 0.5) * (height / h) - 0.5
+                        px, py = (xx + 0.5) * (width / w) - 0.5, (y + 0.5) * (height / h) - 0.5
                     found[b].append((px, py, torch.full((len(y),), 32 / s, device=x.device), score, desc))
             s /= cfg.scale_factor
             if min(height, width) * s < MIN_SIDE:

@@ -114,6 +114,8 @@ def test_learned_options_default_to_the_papers_multiscale_settings():
     assert MultiScaleConfig(**options.multiscale(), top_k=None) == MultiScaleConfig(top_k=None, precision="bf16")
     with pytest.raises(ValueError, match="method 'lburst': precision must be fp32, bf16 or fp16"):
         parse_options(LearnedOptions, {"precision": "int8"}, "lburst")
+    given = parse_options(LearnedOptions, {"min_size": "320", "subpixel": "true"}, "lburst").multiscale()
+    assert MultiScaleConfig(**given) == MultiScaleConfig(min_size=320, subpixel=True)
 
 
 def test_lburst_methods_lists_every_method_and_matcher_with_defaults(capsys):
