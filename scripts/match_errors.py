@@ -12,7 +12,13 @@ pixels.  Tables, one row per method:
 - by scale change: right matches summed over the pairs whose scale change (a similarity
   fitted to the right matches of all methods together) lies in each band;
 - by gap (a sequence: a flight, a walk): right matches, and those under 1 px, summed over the
-  pairs that lie 1, 2, ... images apart in name order, the baseline growing with the gap.
+  pairs that lie 1, 2, ... images apart in name order, the baseline growing with the gap;
+- relative pose: the essential matrix of every pair's putative matches (COLMAP's LO-RANSAC
+  at ``POSE_PX`` px, ``POSE_SEEDS`` seeds), against the reference relative pose; a pair's error is the larger
+  of the rotation's and the translation direction's angular errors (180 degrees where the
+  estimate fails), summarised as the area under its cumulative curve to 5, 10 and 20 degrees
+  (the pose AUC of SuperGlue's and LightGlue's evaluations).  Without COLMAP's run-to-run
+  spread, this is where the keypoints' localisation shows in pose.
 
     python scripts/match_errors.py outputs/scenes/sacre_coeur_g50 \
         outputs/recon_seeds_g50/lburst_*/sacre_coeur_g50 outputs/recon_seeds_g50/B5.pt*/sacre_coeur_g50 \
@@ -38,6 +44,10 @@ RIGHT_PX, WRONG_PX = 4.0, 8.0
 ERROR_EDGES = (0.5, 1.0, 2.0, 4.0)
 SCALE_BANDS = ((1.0, 1.2), (1.2, 1.5), (1.5, np.inf))
 MIN_FIT = 30  # right matches needed to fit a pair's similarity
+POSE_PX = 1.0  # RANSAC threshold of the relative pose, in pixels
+AUC_DEG = (5, 10, 20)
+POSE_SEEDS = (0, 1, 2, 3, 4)  # RANSAC seeds: every pair's pose is estimated once per seed
+POSE_TRIALS = 10_000  # at most, per estimate (COLMAP: 100,000; a pair that needs more is lost anyway)
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -66,9 +76,47 @@ def sampson_px(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray) -
     return np.sqrt(d2) * np.sqrt(cameras[a].params[0] * cameras[b].params[0])
 
 
+def relative_pose_error(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray, seed: int = 0) -> float:
+    """Degrees: the larger angular error of the rotation and of the translation direction of
+    the pose that COLMAP's LO-RANSAC (``pycolmap.estimate_essential_matrix``, ``POSE_PX``,
+    seeded) finds from ``ka <-> kb`` (180 when it finds none)."""
+    if len(ka) < 5:
+        return 180.0
+    options = pycolmap.RANSACOptions(max_error=POSE_PX, random_seed=seed, max_num_trials=POSE_TRIALS)
+    found = pycolmap.estimate_essential_matrix(
+        ka.astype(np.float64), kb.astype(np.float64), cameras[a], cameras[b], options
+    )
+    if found is None:
+        return 180.0
+    pose = found["cam2_from_cam1"]
+    rot, t = pose.rotation.matrix(), pose.translation
+    (ra, ta), (rb, tb) = poses[a], poses[b]
+    rot_true = rb @ ra.T
+    t_true = tb - rot_true @ ta
+    cos_r = (np.trace(rot.T @ rot_true) - 1) / 2
+    err_r = np.degrees(np.arccos(np.clip(cos_r, -1, 1)))
+    cos_t = float(t @ t_true) / (np.linalg.norm(t) * np.linalg.norm(t_true) + 1e-12)
+    err_t = np.degrees(np.arccos(np.clip(cos_t, -1, 1)))
+    return float(max(err_r, min(err_t, 180 - err_t)))
+
+
+def pose_auc(errors: list[float], limits=AUC_DEG) -> dict:
+    """Area under the cumulative curve of ``errors`` (degrees) up to each limit, normalised to 1."""
+    errs = np.sort(np.asarray(errors, float))
+    recall = np.arange(1, len(errs) + 1) / len(errs)
+    errs, recall = np.r_[0.0, errs], np.r_[0.0, recall]
+    out = {}
+    for limit in limits:
+        i = np.searchsorted(errs, limit)
+        x = np.r_[errs[:i], limit]
+        y = np.r_[recall[:i], recall[i - 1]]
+        out[str(limit)] = float(np.trapezoid(y, x) / limit)
+    return out
+
+
 def putative_matches(run: Path, cameras, poses) -> dict:
     """Per pair (a, b): keypoints of both sides, the lower score, and the error in px."""
-    out = {}
+    out, pose_errors = {}, []
     with h5py.File(run / "features.h5", "r") as feats:  # each image's keypoints and scores, read once
         kps = {name: feats[name]["keypoints"][()] for name in feats}
         scores = {name: feats[name]["scores"][()] for name in feats}
@@ -81,7 +129,8 @@ def putative_matches(run: Path, cameras, poses) -> dict:
                 score = np.minimum(scores[a][i], scores[b][m[i]])
                 na, nb = Path(a).stem, Path(b).stem
                 out[tuple(sorted((na, nb)))] = (ka, kb, score, sampson_px(cameras, poses, na, nb, ka, kb))
-    return {"pairs": out, "scores": np.concatenate(list(scores.values()))}
+                pose_errors += [relative_pose_error(cameras, poses, na, nb, ka, kb, seed) for seed in POSE_SEEDS]
+    return {"pairs": out, "scores": np.concatenate(list(scores.values())), "pose_errors": pose_errors}
 
 
 def pair_scales(runs: list[dict]) -> dict:
@@ -143,6 +192,8 @@ def summary(run: dict, scales: dict, order: list[str]) -> dict:
         ],
         "by_scale": by_scale,
         "by_gap": by_gap(run, order),
+        "pose_auc": pose_auc(run["pose_errors"]),
+        "pose_median_deg": float(np.median(run["pose_errors"])),
     }
 
 
@@ -191,6 +242,14 @@ def main() -> None:
     for label, r in results.items():
         cells = [r["by_gap"].get(g, {"right": 0, "under_1px": 0}) for g in gaps]
         print(f"| {label} | " + " | ".join(f"{c['right']} ({c['under_1px']})" for c in cells) + " |")
+    print(
+        f"\nrelative pose from the putative matches (LO-RANSAC at {POSE_PX:g} px, {len(POSE_SEEDS)} seeds a pair), AUC and median error:\n"
+    )
+    print("| method | pairs | " + " | ".join(f"AUC@{d}" for d in AUC_DEG) + " | median (deg) |")
+    print("|---|---|" + "---|" * (len(AUC_DEG) + 1))
+    for label, (r, run) in zip(results, zip(results.values(), runs)):
+        aucs = " | ".join(f"{r['pose_auc'][str(d)]:.3f}" for d in AUC_DEG)
+        print(f"| {label} | {len(run['pose_errors']) // len(POSE_SEEDS)} | {aucs} | {r['pose_median_deg']:.2f} |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(

@@ -63,3 +63,29 @@ def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path, layout)
     assert summary["by_gap"]["1"]["pairs"] == 1 and summary["by_gap"]["1"]["right"] == summary["right"]
     assert 150 <= summary["by_gap"]["1"]["under_1px"] <= summary["right"]
     assert summary["by_score_quartile"][3]["wrong"] > summary["by_score_quartile"][0]["wrong"] == 0
+    # the relative pose from these matches (25 % outliers) is the reference one
+    assert max(found["pose_errors"]) < 0.5
+    assert summary["pose_auc"]["5"] > 0.9
+
+
+def test_a_wrong_relative_pose_is_measured_in_degrees_and_the_auc_follows_its_curve():
+    me = _script()
+    camera = {"model": "PINHOLE", "width": 640, "height": 480, "params": [500.0, 500.0, 320.0, 240.0]}
+    import pycolmap
+
+    cameras = {n: pycolmap.Camera(**camera) for n in "ab"}
+    rng = np.random.default_rng(1)
+    world = np.c_[rng.uniform(-2, 2, (300, 2)), rng.uniform(6, 10, 300)]
+    seen = {"a": (np.eye(3), np.zeros(3)), "b": (_rotation(10), np.array([-1.0, 0.0, 0.2]))}
+    kps = {}
+    for name, (r, t) in seen.items():
+        cam = world @ r.T + t
+        kps[name] = 500 * cam[:, :2] / cam[:, 2:] + [320, 240]
+    told = {"a": seen["a"], "b": (_rotation(13), seen["b"][1])}  # a reference 3 degrees off the truth
+    error = me.relative_pose_error(cameras, told, "a", "b", kps["a"], kps["b"])
+    assert error == pytest.approx(3.0, abs=0.05)
+    assert me.relative_pose_error(cameras, told, "a", "b", kps["a"][:4], kps["b"][:4]) == 180.0
+    auc = me.pose_auc([0.0, 2.0, 4.0, 30.0])
+    # trapezoids under the curve through (0, 1/4), (2, 2/4), (4, 3/4), flat to the limit (as SuperGlue's)
+    assert auc["5"] == pytest.approx((2 * 0.375 + 2 * 0.625 + 1 * 0.75) / 5)
+    assert auc["20"] == pytest.approx((2 * 0.375 + 2 * 0.625 + 16 * 0.75) / 20)
