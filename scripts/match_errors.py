@@ -14,11 +14,11 @@ pixels.  Tables, one row per method:
 - by gap (a sequence: a flight, a walk): right matches, and those under 1 px, summed over the
   pairs that lie 1, 2, ... images apart in name order, the baseline growing with the gap;
 - relative pose: the essential matrix of every pair's putative matches (COLMAP's LO-RANSAC
-  at ``POSE_PX`` px, ``POSE_SEEDS`` seeds), against the reference relative pose; a pair's error is the larger
-  of the rotation's and the translation direction's angular errors (180 degrees where the
-  estimate fails), summarised as the area under its cumulative curve to 5, 10 and 20 degrees
-  (the pose AUC of SuperGlue's and LightGlue's evaluations).  Without COLMAP's run-to-run
-  spread, this is where the keypoints' localisation shows in pose.
+  at ``POSE_PX`` px, once per RANSAC seed, ``--pose-seeds``) against the reference relative
+  pose; a pair's error is the larger of the rotation's and the translation direction's
+  angular errors (180 degrees where the estimate fails), summarised as the area under its
+  cumulative curve to 5, 10 and 20 degrees (the pose AUC of SuperGlue's and LightGlue's
+  evaluations): a measure of pose without COLMAP's run-to-run spread.
 
     python scripts/match_errors.py outputs/scenes/sacre_coeur_g50 \
         outputs/recon_seeds_g50/lburst_*/sacre_coeur_g50 outputs/recon_seeds_g50/B5.pt*/sacre_coeur_g50 \
@@ -46,7 +46,7 @@ SCALE_BANDS = ((1.0, 1.2), (1.2, 1.5), (1.5, np.inf))
 MIN_FIT = 30  # right matches needed to fit a pair's similarity
 POSE_PX = 1.0  # RANSAC threshold of the relative pose, in pixels
 AUC_DEG = (5, 10, 20)
-POSE_SEEDS = (0, 1, 2, 3, 4)  # RANSAC seeds: every pair's pose is estimated once per seed
+POSE_SEEDS = 5  # RANSAC seeds by default: every pair's pose is estimated once per seed
 POSE_TRIALS = 10_000  # at most, per estimate (COLMAP: 100,000; a pair that needs more is lost anyway)
 
 
@@ -114,8 +114,9 @@ def pose_auc(errors: list[float], limits=AUC_DEG) -> dict:
     return out
 
 
-def putative_matches(run: Path, cameras, poses) -> dict:
-    """Per pair (a, b): keypoints of both sides, the lower score, and the error in px."""
+def putative_matches(run: Path, cameras, poses, pose_seeds: int = POSE_SEEDS) -> dict:
+    """Per pair (a, b): keypoints of both sides, the lower score, and the error in px; and the
+    relative pose errors of every pair under RANSAC seeds ``0 .. pose_seeds - 1``."""
     out, pose_errors = {}, []
     with h5py.File(run / "features.h5", "r") as feats:  # each image's keypoints and scores, read once
         kps = {name: feats[name]["keypoints"][()] for name in feats}
@@ -129,7 +130,7 @@ def putative_matches(run: Path, cameras, poses) -> dict:
                 score = np.minimum(scores[a][i], scores[b][m[i]])
                 na, nb = Path(a).stem, Path(b).stem
                 out[tuple(sorted((na, nb)))] = (ka, kb, score, sampson_px(cameras, poses, na, nb, ka, kb))
-                pose_errors += [relative_pose_error(cameras, poses, na, nb, ka, kb, seed) for seed in POSE_SEEDS]
+                pose_errors += [relative_pose_error(cameras, poses, na, nb, ka, kb, seed) for seed in range(pose_seeds)]
     return {"pairs": out, "scores": np.concatenate(list(scores.values())), "pose_errors": pose_errors}
 
 
@@ -179,6 +180,7 @@ def summary(run: dict, scales: dict, order: list[str]) -> dict:
         )
     return {
         "putative": int(len(errors)),
+        "putative_pairs": len(run["pairs"]),
         "share_under": {str(e): float(np.mean(errors < e)) for e in ERROR_EDGES},
         "share_wrong": float(np.mean(errors > WRONG_PX)),
         "right": int(np.sum(errors < RIGHT_PX)),
@@ -192,8 +194,11 @@ def summary(run: dict, scales: dict, order: list[str]) -> dict:
         ],
         "by_scale": by_scale,
         "by_gap": by_gap(run, order),
-        "pose_auc": pose_auc(run["pose_errors"]),
-        "pose_median_deg": float(np.median(run["pose_errors"])),
+        **(
+            {"pose_auc": pose_auc(run["pose_errors"]), "pose_median_deg": float(np.median(run["pose_errors"]))}
+            if run["pose_errors"]
+            else {}
+        ),
     }
 
 
@@ -203,6 +208,12 @@ def main() -> None:
     p.add_argument("runs", type=Path, nargs="+", help="OUT/<method>/<scene> folders of lburst bench reconstruction")
     p.add_argument("--labels", nargs="+", help="a name per run (default: the method folder's)")
     p.add_argument("--out", type=Path, help="write the tables as JSON")
+    p.add_argument(
+        "--pose-seeds",
+        type=int,
+        default=POSE_SEEDS,
+        help=f"RANSAC seeds of each pair's relative pose (0: no pose table; default {POSE_SEEDS})",
+    )
     args = p.parse_args()
     labels = args.labels or [r.parent.name for r in args.runs]
     if len(labels) != len(args.runs):
@@ -216,7 +227,9 @@ def main() -> None:
         cameras, poses = reference_geometry(args.scene)
     except LBurstValueError as err:
         p.error(str(err))
-    runs = [putative_matches(r, cameras, poses) for r in args.runs]
+    if args.pose_seeds < 0:
+        p.error(f"--pose-seeds must be >= 0, got {args.pose_seeds}")
+    runs = [putative_matches(r, cameras, poses, args.pose_seeds) for r in args.runs]
     scales = pair_scales(runs)
     order = sorted(poses)
     results = {label: summary(run, scales, order) for label, run in zip(labels, runs)}
@@ -242,14 +255,13 @@ def main() -> None:
     for label, r in results.items():
         cells = [r["by_gap"].get(g, {"right": 0, "under_1px": 0}) for g in gaps]
         print(f"| {label} | " + " | ".join(f"{c['right']} ({c['under_1px']})" for c in cells) + " |")
-    print(
-        f"\nrelative pose from the putative matches (LO-RANSAC at {POSE_PX:g} px, {len(POSE_SEEDS)} seeds a pair), AUC and median error:\n"
-    )
-    print("| method | pairs | " + " | ".join(f"AUC@{d}" for d in AUC_DEG) + " | median (deg) |")
-    print("|---|---|" + "---|" * (len(AUC_DEG) + 1))
-    for label, (r, run) in zip(results, zip(results.values(), runs)):
-        aucs = " | ".join(f"{r['pose_auc'][str(d)]:.3f}" for d in AUC_DEG)
-        print(f"| {label} | {len(run['pose_errors']) // len(POSE_SEEDS)} | {aucs} | {r['pose_median_deg']:.2f} |")
+    if args.pose_seeds:
+        print(f"\nrelative pose (LO-RANSAC at {POSE_PX:g} px, {args.pose_seeds} seeds a pair), AUC and median error:\n")
+        print("| method | pairs | " + " | ".join(f"AUC@{d}" for d in AUC_DEG) + " | median (deg) |")
+        print("|---|---|" + "---|" * (len(AUC_DEG) + 1))
+        for label, r in results.items():
+            aucs = " | ".join(f"{r['pose_auc'][str(d)]:.3f}" for d in AUC_DEG)
+            print(f"| {label} | {r['putative_pairs']} | {aucs} | {r['pose_median_deg']:.2f} |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(
