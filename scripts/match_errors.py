@@ -64,13 +64,19 @@ def reference_geometry(scene: Path):
     return cameras, Reference.load(path).poses
 
 
+def relative_pose(poses, a: str, b: str) -> tuple[np.ndarray, np.ndarray]:
+    """The reference pose of camera ``b`` from camera ``a``: ``(R, t)``, ``x_b = R x_a + t``."""
+    (ra, ta), (rb, tb) = poses[a], poses[b]
+    rot = rb @ ra.T
+    return rot, tb - rot @ ta
+
+
 def sampson_px(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray) -> np.ndarray:
     """Sampson distance (px, at the geometric mean focal length) of matches ka <-> kb."""
     xa = np.c_[cameras[a].cam_from_img(ka.astype(np.float64)), np.ones(len(ka))]
     xb = np.c_[cameras[b].cam_from_img(kb.astype(np.float64)), np.ones(len(kb))]
-    (ra, ta), (rb, tb) = poses[a], poses[b]
-    rot = rb @ ra.T
-    essential = skew(tb - rot @ ta) @ rot
+    rot, t = relative_pose(poses, a, b)
+    essential = skew(t) @ rot
     la, lb = xa @ essential.T, xb @ essential
     d2 = np.sum(xb * la, 1) ** 2 / (la[:, 0] ** 2 + la[:, 1] ** 2 + lb[:, 0] ** 2 + lb[:, 1] ** 2)
     return np.sqrt(d2) * np.sqrt(cameras[a].params[0] * cameras[b].params[0])
@@ -90,9 +96,7 @@ def relative_pose_error(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.n
         return 180.0
     pose = found["cam2_from_cam1"]
     rot, t = pose.rotation.matrix(), pose.translation
-    (ra, ta), (rb, tb) = poses[a], poses[b]
-    rot_true = rb @ ra.T
-    t_true = tb - rot_true @ ta
+    rot_true, t_true = relative_pose(poses, a, b)
     cos_r = (np.trace(rot.T @ rot_true) - 1) / 2
     err_r = np.degrees(np.arccos(np.clip(cos_r, -1, 1)))
     cos_t = float(t @ t_true) / (np.linalg.norm(t) * np.linalg.norm(t_true) + 1e-12)

@@ -28,21 +28,30 @@ def _rotation(deg: float) -> np.ndarray:
     return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
 
 
+CAMERA = {"model": "PINHOLE", "width": 640, "height": 480, "params": [500.0, 500.0, 320.0, 240.0]}
+POSES = {"a": (np.eye(3), np.zeros(3)), "b": (_rotation(10), np.array([-1.0, 0.0, 0.2]))}
+
+
+def _seen(rng: np.random.Generator, count: int) -> dict[str, np.ndarray]:
+    """Pixels of ``count`` random points 6-10 m ahead in the images of :data:`POSES` under :data:`CAMERA`."""
+    world = np.c_[rng.uniform(-2, 2, (count, 2)), rng.uniform(6, 10, count)]
+    pixels = {}
+    for name, (r, t) in POSES.items():
+        cam = world @ r.T + t
+        pixels[name] = 500 * cam[:, :2] / cam[:, 2:] + [320, 240]
+    return pixels
+
+
 @pytest.mark.parametrize("layout", ["per_image", "shared"])  # a photo set's cameras; a synthetic flight's one
 def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path, layout):
     me = _script()
     rng = np.random.default_rng(0)
-    camera = {"model": "PINHOLE", "width": 640, "height": 480, "params": [500.0, 500.0, 320.0, 240.0]}
-    poses = {"a": (np.eye(3), np.zeros(3)), "b": (_rotation(10), np.array([-1.0, 0.0, 0.2]))}
+    camera, poses = CAMERA, POSES
     scene = tmp_path / "scene"
     scene.mkdir()
     per_image = {n: camera for n in poses} if layout == "per_image" else None
     save_reference(Reference("sift-clean", camera, poses), scene / "reference.json", per_image)
-    world = np.c_[rng.uniform(-2, 2, (200, 2)), rng.uniform(6, 10, 200)]
-    kps = {}
-    for name, (r, t) in poses.items():
-        cam = world @ r.T + t
-        kps[name] = (500 * cam[:, :2] / cam[:, 2:] + [320, 240]).astype(np.float32)
+    kps = {name: pixels.astype(np.float32) for name, pixels in _seen(rng, 200).items()}
     run = tmp_path / "run"
     run.mkdir()
     matches = np.arange(200, dtype=np.int32)
@@ -69,19 +78,12 @@ def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path, layout)
 
 
 def test_a_wrong_relative_pose_is_measured_in_degrees_and_the_auc_follows_its_curve():
-    me = _script()
-    camera = {"model": "PINHOLE", "width": 640, "height": 480, "params": [500.0, 500.0, 320.0, 240.0]}
     import pycolmap
 
-    cameras = {n: pycolmap.Camera(**camera) for n in "ab"}
-    rng = np.random.default_rng(1)
-    world = np.c_[rng.uniform(-2, 2, (300, 2)), rng.uniform(6, 10, 300)]
-    seen = {"a": (np.eye(3), np.zeros(3)), "b": (_rotation(10), np.array([-1.0, 0.0, 0.2]))}
-    kps = {}
-    for name, (r, t) in seen.items():
-        cam = world @ r.T + t
-        kps[name] = 500 * cam[:, :2] / cam[:, 2:] + [320, 240]
-    told = {"a": seen["a"], "b": (_rotation(13), seen["b"][1])}  # a reference 3 degrees off the truth
+    me = _script()
+    cameras = {n: pycolmap.Camera(**CAMERA) for n in "ab"}
+    kps = _seen(np.random.default_rng(1), 300)
+    told = {"a": POSES["a"], "b": (_rotation(13), POSES["b"][1])}  # a reference 3 degrees off the truth
     error = me.relative_pose_error(cameras, told, "a", "b", kps["a"], kps["b"])
     assert error == pytest.approx(3.0, abs=0.05)
     assert me.relative_pose_error(cameras, told, "a", "b", kps["a"][:4], kps["b"][:4]) == 180.0

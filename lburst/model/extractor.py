@@ -191,19 +191,21 @@ def subpixel_offsets(rep: torch.Tensor, y: torch.Tensor, x: torch.Tensor) -> tup
     whose neighbour falls outside the map, or whose three samples are not concave, keeps 0."""
     h, w = rep.shape[-2:]
     r = rep[0, 0].float()
-    offsets = []
-    for along, size in ((0, h), (1, w)):
-        pos = (y, x)[along]
-        inside = (pos > 0) & (pos < size - 1)
-        lo, hi = (pos - 1).clamp(min=0), (pos + 1).clamp(max=size - 1)
-        before = r[lo, x] if along == 0 else r[y, lo]
-        after = r[hi, x] if along == 0 else r[y, hi]
-        centre = r[y, x]
-        curvature = before - 2 * centre + after
-        concave = inside & (curvature < 0)
-        step = torch.where(concave, (before - after) / (2 * curvature.where(concave, -1.0)), 0.0)
-        offsets.append(step.clamp(-0.5, 0.5))
-    return offsets[0], offsets[1]
+    up, down = (y - 1).clamp(min=0), (y + 1).clamp(max=h - 1)
+    left, right = (x - 1).clamp(min=0), (x + 1).clamp(max=w - 1)
+    centre = r[y, x]
+    dy = _vertex(r[up, x], centre, r[down, x], (y > 0) & (y < h - 1))
+    dx = _vertex(r[y, left], centre, r[y, right], (x > 0) & (x < w - 1))
+    return dy, dx
+
+
+def _vertex(before: torch.Tensor, centre: torch.Tensor, after: torch.Tensor, inside: torch.Tensor) -> torch.Tensor:
+    """Offset of the vertex of the parabola through three samples one pixel apart, within
+    half a pixel; 0 where ``inside`` is false or the samples are not concave."""
+    curvature = before - 2 * centre + after
+    concave = inside & (curvature < 0)
+    step = torch.where(concave, (before - after) / (2 * curvature.where(concave, -1.0)), 0.0)
+    return step.clamp(-0.5, 0.5)
 
 
 def _layout(x: torch.Tensor) -> torch.memory_format:
