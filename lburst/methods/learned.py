@@ -56,6 +56,7 @@ class LearnedOptions:
     min_size: int = MultiScaleConfig.min_size
     max_size: int = MultiScaleConfig.max_size
     scale_factor: float = MultiScaleConfig.scale_factor
+    max_scale: float = MultiScaleConfig.max_scale
     rel_thr: float = MultiScaleConfig.rel_thr
     rep_thr: float = MultiScaleConfig.rep_thr
     published_coordinates: bool = MultiScaleConfig.published_coordinates
@@ -89,6 +90,7 @@ class LearnedOptions:
                 "min_size",
                 "max_size",
                 "scale_factor",
+                "max_scale",
                 "rel_thr",
                 "rep_thr",
                 "published_coordinates",

@@ -55,8 +55,12 @@ class MultiScaleConfig:
         min_size: smallest long side of a pyramid level, in pixels.
         max_size: largest long side of a pyramid level, in pixels.
         scale_factor: ratio between consecutive levels.
-        min_scale, max_scale: bounds on the level's scale relative to the input (at most 1:
-            the pyramid starts at the input's size, as the published code's does).
+        min_scale, max_scale: bounds on the level's scale relative to the input.  The published
+            code's pyramid starts at the input's size (``max_scale`` 1); above 1 (at most
+            :data:`MAX_UPSCALE`) it starts with levels upsampled from the input (bilinear), at
+            the powers of ``scale_factor`` up to ``max_scale`` (and ``max_size``), so that a view
+            seen from further away meets the nearer view's finest keypoints at their scale.
+            The levels from the input down are the same as without them.
         rel_thr, rep_thr: reliability and repeatability thresholds for keypoints.
         top_k: keep the best ``top_k`` keypoints by score (``None``: all).
         published_coordinates: map level coordinates as the published code does
@@ -113,12 +117,11 @@ class MultiScaleConfig:
             _is_real(self.min_scale)
             and _is_real(self.max_scale)
             and 0 <= self.min_scale <= self.max_scale
-            and 0 < self.max_scale <= 1
+            and 0 < self.max_scale <= MAX_UPSCALE
         ):
             raise LBurstValueError(
-                f"scales must satisfy 0 <= min_scale <= max_scale, 0 < max_scale <= 1 (no level is "
-                f"larger than the input: resize the burst to extract above it); "
-                f"got {self.min_scale!r}, {self.max_scale!r}"
+                f"scales must satisfy 0 <= min_scale <= max_scale, 0 < max_scale <= {MAX_UPSCALE} (levels above 1 "
+                f"are upsampled from the input); got {self.min_scale!r}, {self.max_scale!r}"
             )
         for name in ("rel_thr", "rep_thr"):
             value = getattr(self, name)
@@ -141,7 +144,19 @@ class MultiScaleConfig:
 
 
 MAX_LEVELS = 64  # pyramid levels of one extraction (the paper's settings make 9)
+MAX_UPSCALE = 4.0  # the largest max_scale: a level upsampled 4x costs 16 full-size levels
 MIN_SIDE = 8  # pixels: images and pyramid levels smaller than this are not used
+
+
+def upper_scales(cfg: MultiScaleConfig, long_side: int) -> list[float]:
+    """Scales above 1 of the levels upsampled from an input of ``long_side`` pixels, largest
+    first: the powers of ``cfg.scale_factor`` up to ``cfg.max_scale`` and ``cfg.max_size``
+    (none at the default ``max_scale`` 1)."""
+    top = min(cfg.max_scale, cfg.max_size / long_side)
+    if top <= 1.001:
+        return []
+    n = math.floor(math.log(top + 0.001) / math.log(cfg.scale_factor))
+    return [cfg.scale_factor**k for k in range(n, 0, -1)]
 
 
 def _is_int(value) -> bool:
@@ -715,36 +730,17 @@ class LBurst:
         batch = x.shape[0]
         long_side = max(height, width)
         found: list[list[tuple]] = [[] for _ in range(batch)]  # per burst: (x, y, scale, score, desc) per level
+        if start == 1.0:  # levels above the input, each upsampled from it
+            for s in upper_scales(cfg, long_side):
+                level = F.interpolate(x, (round(height * s), round(width * s)), mode="bilinear", align_corners=False)
+                self._level(level, s, cfg, found, full=(height, width))
         s = start
         lowest = max(cfg.min_scale, cfg.min_size / long_side)
         if s + 0.001 < lowest:  # an image smaller than min_size: one level at its own size
             lowest = s
         while s + 0.001 >= lowest:
             if s - 0.001 <= min(cfg.max_scale, cfg.max_size / long_side):
-                h, w = x.shape[-2:]
-                xp, pad = self._reflect(x, cfg.pad)
-                if cfg.fast or self.net is None:
-                    rep, rel, half = self._fast_level(xp, cfg.precision)
-                    stride = descriptor_stride(half.shape[-1], xp.shape[-1])
-                else:
-                    out = self.net(xp)
-                    rep, rel = out["repeatability"], out["reliability"]
-                for b in range(batch):
-                    y, xx = _local_maxima(rep[b : b + 1], rel[b : b + 1], cfg, pad)
-                    score = rep[b, 0, y, xx] * rel[b, 0, y, xx]
-                    keep = score >= _kth_best([score] + [level[3] for level in found[b]], cfg.top_k)
-                    y, xx, score = y[keep], xx[keep], score[keep]
-                    if cfg.fast or self.net is None:
-                        desc = descriptors_at(half[b : b + 1], y, xx, stride)
-                    else:
-                        desc = out["descriptors"][b, :, y, xx].t()
-                    fy, fx = subpixel_offsets(rep[b : b + 1], y, xx) if cfg.subpixel else (0.0, 0.0)
-                    y, xx = y.float() - pad + fy, xx.float() - pad + fx
-                    if cfg.published_coordinates:
-                        px, py = xx * width / w, y * height / h
-                    else:
-                        px, py = (xx + 0.5) * (width / w) - 0.5, (y + 0.5) * (height / h) - 0.5
-                    found[b].append((px, py, torch.full((len(y),), 32 / s, device=x.device), score, desc))
+                self._level(x, s, cfg, found, full=(height, width))
             s /= cfg.scale_factor
             if min(height, width) * s < MIN_SIDE:
                 break
@@ -758,6 +754,37 @@ class LBurst:
             )
         results = [{**self._select(levels, cfg), "image_size": image_size(width, height)} for levels in found]
         return results[0] if batch == 1 else results
+
+    def _level(
+        self, x: torch.Tensor, s: float, cfg: MultiScaleConfig, found: list[list[tuple]], full: tuple[int, int]
+    ) -> None:
+        """Keypoints of one pyramid level ``x`` (B, 3N, h, w), at scale ``s`` of the bursts' ``full``
+        (H, W), appended to each burst's list in ``found`` as (x, y, scale, score, descriptors)."""
+        height, width = full
+        h, w = x.shape[-2:]
+        xp, pad = self._reflect(x, cfg.pad)
+        if cfg.fast or self.net is None:
+            rep, rel, half = self._fast_level(xp, cfg.precision)
+            stride = descriptor_stride(half.shape[-1], xp.shape[-1])
+        else:
+            out = self.net(xp)
+            rep, rel = out["repeatability"], out["reliability"]
+        for b in range(x.shape[0]):
+            y, xx = _local_maxima(rep[b : b + 1], rel[b : b + 1], cfg, pad)
+            score = rep[b, 0, y, xx] * rel[b, 0, y, xx]
+            keep = score >= _kth_best([score] + [level[3] for level in found[b]], cfg.top_k)
+            y, xx, score = y[keep], xx[keep], score[keep]
+            if cfg.fast or self.net is None:
+                desc = descriptors_at(half[b : b + 1], y, xx, stride)
+            else:
+                desc = out["descriptors"][b, :, y, xx].t()
+            fy, fx = subpixel_offsets(rep[b : b + 1], y, xx) if cfg.subpixel else (0.0, 0.0)
+            y, xx = y.float() - pad + fy, xx.float() - pad + fx
+            if cfg.published_coordinates:
+                px, py = xx * width / w, y * height / h
+            else:
+                px, py = (xx + 0.5) * (width / w) - 0.5, (y + 0.5) * (height / h) - 0.5
+            found[b].append((px, py, torch.full((len(y),), 32 / s, device=x.device), score, desc))
 
     def _select(self, levels: list[tuple], cfg: MultiScaleConfig) -> Features:
         """The ``top_k`` best keypoints of one burst over its pyramid levels, by decreasing score."""

@@ -26,7 +26,7 @@ from lburst.model.network import LBurstNet, NetConfig
         ({"top_k": 3.5}, "top_k"),
         ({"top_k": True}, "top_k"),
         ({"max_scale": 0.0}, "scales"),
-        ({"max_scale": 1.6}, "max_scale <= 1"),  # the pyramid never goes above the input
+        ({"max_scale": 4.5}, "max_scale <= 4.0"),  # levels above the input are upsampled, within reason
         ({"subpixel": 1}, "subpixel"),
         ({"fast": "no"}, "fast"),
         ({"precision": "fp8"}, "precision"),
