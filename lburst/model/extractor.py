@@ -148,11 +148,17 @@ MAX_UPSCALE = 4.0  # the largest max_scale: a level upsampled 4x costs 16 full-s
 MIN_SIDE = 8  # pixels: images and pyramid levels smaller than this are not used
 
 
+def top_scale(cfg: MultiScaleConfig, long_side: int) -> float:
+    """The largest scale a pyramid level of an input of ``long_side`` pixels may have: at most
+    ``cfg.max_scale``, and no level's long side above ``cfg.max_size``."""
+    return min(cfg.max_scale, cfg.max_size / long_side)
+
+
 def upper_scales(cfg: MultiScaleConfig, long_side: int) -> list[float]:
     """Scales above 1 of the levels upsampled from an input of ``long_side`` pixels, largest
-    first: the powers of ``cfg.scale_factor`` up to ``cfg.max_scale`` and ``cfg.max_size``
-    (none at the default ``max_scale`` 1)."""
-    top = min(cfg.max_scale, cfg.max_size / long_side)
+    first: the powers of ``cfg.scale_factor`` up to :func:`top_scale` (none at the default
+    ``max_scale`` 1)."""
+    top = top_scale(cfg, long_side)
     if top <= 1.001:
         return []
     n = math.floor(math.log(top + 0.001) / math.log(cfg.scale_factor))
@@ -554,7 +560,7 @@ class LBurst:
         1024 px) instead of the whole normalised burst at full resolution."""
         height, width = burst.shape[1:3]
         long_side = max(height, width)
-        upper = min(cfg.max_scale, cfg.max_size / long_side)
+        upper = top_scale(cfg, long_side)
         lowest = max(cfg.min_scale, cfg.min_size / long_side)
         s, sizes = 1.0, []
         while s - 0.001 > upper and s / cfg.scale_factor + 0.001 >= lowest:
@@ -734,12 +740,12 @@ class LBurst:
             for s in upper_scales(cfg, long_side):
                 level = F.interpolate(x, (round(height * s), round(width * s)), mode="bilinear", align_corners=False)
                 self._level(level, s, cfg, found, full=(height, width))
-        s = start
+        s, top = start, top_scale(cfg, long_side)
         lowest = max(cfg.min_scale, cfg.min_size / long_side)
         if s + 0.001 < lowest:  # an image smaller than min_size: one level at its own size
             lowest = s
         while s + 0.001 >= lowest:
-            if s - 0.001 <= min(cfg.max_scale, cfg.max_size / long_side):
+            if s - 0.001 <= top:
                 self._level(x, s, cfg, found, full=(height, width))
             s /= cfg.scale_factor
             if min(height, width) * s < MIN_SIDE:
