@@ -12,7 +12,9 @@ bursts come from the features store (:mod:`lburst.store`).  A ``result.json`` wi
 ``OUT/<method>/<scene>/``, seed S in ``OUT/<method>/<scene>-seedS/``, the later seeds reading
 the first one's features), since single runs on a small scene can swing as much as the gaps
 between methods; :func:`lburst.sfm.metrics.seed_summary`
-gives each (method, scene)'s median and range.  A finished
+gives each (method, scene)'s median and range.  A photo scene whose clean-SIFT reference
+was remade under other seeds (``lburst simulate scene --reference-seeds``) adds that spread
+to the report (``reference_spread``): ATE differences below it do not rank methods.  A finished
 run is evaluated again against the scene's ``reference.json`` if that appeared or changed
 since (its SHA-1 is kept in the metrics as ``reference_sha1``), so a remade reference needs
 no rerun of the methods.  The table
@@ -32,6 +34,8 @@ from lburst.burst.io import atomic_path, file_sha1
 from lburst.errors import LBurstValueError
 from lburst.methods import method_slug
 from lburst.methods.learned import results_key
+from lburst.scenes.photo_scene import REFERENCE_DIR
+from lburst.scenes.reference_spread import load_spread
 from lburst.sfm.inputs import open_input
 from lburst.sfm.metrics import aggregate, evaluate_against_reference, seed_summary
 from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP, ReconstructOptions
@@ -141,6 +145,17 @@ def _shared_features(scene: Path, first: Path, options: dict[str, Any]) -> dict[
     return {"features": str(first / "features")}
 
 
+def reference_spreads(scenes: Sequence[str | Path]) -> dict[str, dict[str, Any]]:
+    """Scene name -> the spread of its clean-SIFT reference under other seeds, for the scenes
+    whose current reference has one (:mod:`lburst.scenes.reference_spread`)."""
+    found = {}
+    for scene in map(Path, scenes):
+        record = load_spread(scene, REFERENCE_DIR) if scene.is_dir() else None
+        if record is not None:
+            found[scene.name] = record
+    return found
+
+
 def run_benchmark(
     scenes: list[str | Path],
     methods: list[str],
@@ -180,6 +195,7 @@ def run_benchmark(
         "rows": rows,
         "means": means,
         "by_seed": seed_summary(rows) if len(seeds) > 1 else [],
+        "reference_spread": reference_spreads(scenes),
     }
     with atomic_path(out_dir / "results.json") as tmp:
         tmp.write_text(json.dumps(report, indent=1))

@@ -9,6 +9,7 @@ from lburst.bench.reconstruction import run_benchmark
 from lburst.burst.io import atomic_path
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
+from lburst.scenes.reference_spread import summary
 from lburst.sfm.metrics import markdown_table, seed_table
 from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
 
@@ -79,6 +80,10 @@ def main(args: argparse.Namespace) -> int:
     table = markdown_table(rows + report["means"])
     if report["by_seed"]:
         table += "\n\nOver the seeds " + ", ".join(map(str, report["seeds"])) + ":\n\n" + seed_table(report["by_seed"])
+    if report["reference_spread"]:
+        table += "\n\nHow precise the references are (ATE below this does not rank methods):\n\n" + "\n".join(
+            f"- {scene}: {summary(record)}" for scene, record in report["reference_spread"].items()
+        )
     with atomic_path(Path(args.out) / "table.md") as tmp:
         tmp.write_text(table + "\n")
     print(table)

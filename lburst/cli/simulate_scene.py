@@ -7,7 +7,8 @@ from pathlib import Path
 
 from lburst.cli.numbers import integer, real
 from lburst.errors import RunFailed
-from lburst.scenes.photo_scene import REFERENCE_SOURCE, simulate_scene
+from lburst.scenes.photo_scene import REFERENCE_DIR, REFERENCE_SOURCE, simulate_scene
+from lburst.scenes.reference_spread import load_spread, summary
 from lburst.sfm.scene import list_scene
 
 
@@ -40,6 +41,16 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         default=2,
         help="COLMAP threads for the reference reconstruction (its result depends on them)",
     )
+    parser.add_argument(
+        "--reference-seeds",
+        nargs="+",
+        type=integer(0),
+        default=[],
+        metavar="SEED",
+        help="also reconstruct the clean photos under these COLMAP seeds and record how far each "
+        "lies from the reference (OUT/.reference/spread.json): ATE differences below that spread "
+        "cannot rank methods on this scene",
+    )
 
 
 def reference_options(args: argparse.Namespace) -> dict:
@@ -61,6 +72,7 @@ def main(args: argparse.Namespace) -> int:
         args.seed,
         reference=not args.no_reference,
         reference_options=reference_options(args),
+        reference_seeds=args.reference_seeds,
     )
     if not args.no_reference:
         if ref is None:
@@ -70,5 +82,8 @@ def main(args: argparse.Namespace) -> int:
             f"reference: {len(ref.poses)}/{total} photos registered ({REFERENCE_SOURCE}) "
             f"in {Path(args.out) / 'reference.json'}"
         )
+        spread = load_spread(args.out, REFERENCE_DIR) if args.reference_seeds else None
+        if spread is not None:
+            print(f"reference spread: {summary(spread)}")
     print(f"scene written to {args.out}")
     return 0

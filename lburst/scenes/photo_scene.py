@@ -22,11 +22,16 @@ with one shared refined camera; 29/29 with the shared camera kept at its EXIF fo
 length).  Their non-default values are saved in
 ``SCENE/.reference/options.json``; a re-run reuses the reference only when they are the
 same, else it reconstructs the clean photos again (the SIFT features stay cached).
+
+``reference_seeds`` also reconstruct the clean photos under those COLMAP seeds and record
+how far each lies from the reference (:mod:`lburst.scenes.reference_spread`): the precision
+below which the scene's ATE cannot rank two methods.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +40,7 @@ from tqdm import tqdm
 from lburst.burst.io import atomic_path, frame_name, save_burst
 from lburst.noise import noise_from_spec
 from lburst.scenes.reference import Reference
+from lburst.scenes.reference_spread import reference_spread
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.poses import path_length
 from lburst.sfm.reconstruct import reconstruct_scene
@@ -107,11 +113,13 @@ def simulate_scene(
     reference: bool = True,
     progress: bool = True,
     reference_options: dict | None = None,
+    reference_seeds: Sequence[int] = (),
 ) -> Reference | None:
     """Write the burst scene of ``photos`` into ``out`` (module docstring); returns the reference (or ``None``).
 
     Bursts already written with ``frames`` frames are kept (a re-run resumes), and so is a
-    clean-SIFT reference made with the same ``reference_options``.
+    clean-SIFT reference made with the same ``reference_options``.  ``reference_seeds``: the
+    reference's spread under those seeds, in ``out/.reference/spread.json`` (module docstring).
     """
     photos, out = Path(photos), Path(out)
     items = [item for item in list_scene(photos).items if item.kind == "image"]
@@ -129,13 +137,17 @@ def simulate_scene(
     if not reference:
         return None
     reference_options = dict(reference_options or {})
+    made = None
     if (out / "reference.json").is_file():
         existing = Reference.load(out / "reference.json")
         if existing.source == REFERENCE_SOURCE and reference_options_used(out) == non_default_options(
             reference_options
         ):
-            return existing
-    made = make_reference(photos, out, progress, **reference_options)  # replaces reference.json atomically
+            made = existing
+    if made is None:
+        made = make_reference(photos, out, progress, **reference_options)  # replaces reference.json atomically
     if made is None:
         (out / "reference.json").unlink(missing_ok=True)  # one made with other options is not this reference
+    elif reference_seeds:
+        reference_spread(photos, out, reference_seeds, REFERENCE_METHOD, REFERENCE_DIR, reference_options, progress)
     return made

@@ -117,3 +117,50 @@ def test_cli_reference_options():
     args = parser.parse_args(["photos", "--out", "scene", "--reference-single-camera", "--reference-fix-intrinsics"])
     assert args.reference_single_camera and args.reference_fix_intrinsics and args.reference_threads == 2
     assert "--reference-single-camera" in parser.format_help()
+
+
+def test_reference_spread_is_measured_kept_and_dropped_with_its_reference(photos):
+    import json
+
+    from lburst.scenes.photo_scene import REFERENCE_DIR
+    from lburst.scenes.reference_spread import SPREAD_FILE, load_spread, reference_spread, summary
+
+    out = photos / "scene_spread"
+    simulate_scene(photos / "photos", out, frames=3, noise="gaussian:10", progress=False, reference_seeds=[1, 2])
+    record = load_spread(out, REFERENCE_DIR)
+    assert record is not None and [r["seed"] for r in record["runs"]] == [1, 2] and record["images"] == 6
+    from lburst.sfm.result import ReconstructionResult
+
+    saved = Reference.load(out / "reference.json")
+    names = sorted(saved.poses)
+    for run in record["runs"]:
+        # the ATE is the seed's own clean run against reference.json, as the benchmark measures a method
+        rerun = ReconstructionResult.load(out / REFERENCE_DIR / f"seed{run['seed']}" / "result.json")
+        assert sorted(rerun.poses) == names and run["registered"] == 6
+        own = trajectory_errors([rerun.poses[n] for n in names], [saved.poses[n] for n in names], length=saved.length)
+        assert run["ate_rmse"] == pytest.approx(own["ate_rmse"]) and run["ate_max"] == pytest.approx(own["ate_max"])
+        # both clean runs find the small daylight flight about alike: within 2 % of its path
+        assert run["ate_percent"] < 2.0
+    assert "seeds 1, 2" in summary(record)
+    # a rerun reads the seeds' runs back instead of reconstructing again
+    result = out / REFERENCE_DIR / "seed1" / "result.json"
+    stamp = result.stat().st_mtime_ns
+    assert (
+        reference_spread(photos / "photos", out, [1], "sift", REFERENCE_DIR, {}, progress=False)["runs"][0]
+        == record["runs"][0]
+    )
+    assert result.stat().st_mtime_ns == stamp
+    # a spread made for another reference.json is not this reference's
+    data = json.loads((out / "reference.json").read_text())
+    data["length"] = 2 * data["length"]
+    (out / "reference.json").write_text(json.dumps(data))
+    assert (out / REFERENCE_DIR / SPREAD_FILE).is_file() and load_spread(out, REFERENCE_DIR) is None
+
+
+def test_reference_spread_refuses_bad_seeds(photos):
+    from lburst.errors import LBurstValueError
+    from lburst.scenes.reference_spread import reference_spread
+
+    for seeds in ([], [-1], [True]):
+        with pytest.raises(LBurstValueError, match="reference seeds"):
+            reference_spread(photos / "photos", photos / "nowhere", seeds, "sift", ".reference", {}, progress=False)

@@ -166,3 +166,32 @@ def test_benchmark_runs_each_seed_in_its_own_folder(tmp_path):
     for bad in ([], [-1], [True]):
         with pytest.raises(ValueError, match="seeds"):
             run_benchmark([scene], ["sift"], tmp_path / "bench", seeds=bad)
+
+
+def test_benchmark_reports_the_reference_spread_of_its_current_reference(tmp_path):
+    import numpy as np
+
+    from lburst.burst.io import file_sha1
+    from lburst.scenes.reference import Reference
+
+    scene = tmp_path / "scene"
+    (scene / ".reference").mkdir(parents=True)
+    names = ["a", "b", "c"]
+    poses = {n: (np.eye(3), np.array([-float(i), 0.0, 0.0])) for i, n in enumerate(names)}
+    camera = {"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 50.0, 32.0, 24.0]}
+    Reference("sift-clean", camera, poses, 2.0).save(scene / "reference.json")
+    runs = [{"seed": 1, "registered": 3, "ate_rmse": 0.2}, {"seed": 2, "registered": 2}]
+    record = {"reference_sha1": file_sha1(scene / "reference.json"), "images": 3, "runs": runs}
+    (scene / ".reference" / "spread.json").write_text(json.dumps(record))
+    out = tmp_path / "bench" / method_slug("sift") / scene.name
+    ReconstructionResult(str(scene), "sift", str(out), names, names, poses=poses, metrics={"converged": 1.0}).save()
+    report = run_benchmark([scene], ["sift"], tmp_path / "bench", progress=False)
+    assert report["reference_spread"] == {"scene": record}
+    from lburst.scenes.reference_spread import summary
+
+    assert summary(record) == (
+        "the clean photos under COLMAP seeds 1, 2 lie 0.2 (0.2-0.2) ATE from the reference; seed 2 registers 2/3"
+    )
+    # another reference.json: the spread was not measured for it
+    Reference("sift-clean", camera, poses, 3.0).save(scene / "reference.json")
+    assert run_benchmark([scene], ["sift"], tmp_path / "bench", progress=False)["reference_spread"] == {}
