@@ -40,7 +40,7 @@ from tqdm import tqdm
 from lburst.burst.io import atomic_path, frame_name, save_burst
 from lburst.noise import noise_from_spec
 from lburst.scenes.reference import Reference
-from lburst.scenes.reference_spread import reference_spread
+from lburst.scenes.reference_spread import drop_spread, reference_spread
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.poses import path_length
 from lburst.sfm.reconstruct import reconstruct_scene
@@ -145,6 +145,7 @@ def simulate_scene(
         ):
             made = existing
     if made is None:
+        drop_spread(out, REFERENCE_DIR)  # reruns under other seeds belong to the reference they measured
         made = make_reference(photos, out, progress, **reference_options)  # replaces reference.json atomically
     if made is None:
         (out / "reference.json").unlink(missing_ok=True)  # one made with other options is not this reference

@@ -18,13 +18,16 @@ only matching and mapping run), each in ``SCENE/.reference/seed<S>/``, and write
 Each ATE is the run's trajectory against ``reference.json``'s, after a similarity
 alignment, as the reconstruction benchmark measures a method (:func:`lburst.sfm.poses.trajectory_errors`;
 a run that registers fewer than three reference photos has no ATE).  A run already in
-its folder is read back, not made again.  :func:`load_spread` returns the record only while
-it belongs to the scene's current ``reference.json``.
+its folder is read back, not made again: the reruns belong to the reference they were made
+for, and :func:`drop_spread` removes them when the reference is made again (with other
+options).  :func:`load_spread` returns the record only while it belongs to the scene's
+current ``reference.json``.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -87,6 +90,15 @@ def reference_spread(
     with atomic_path(folder / SPREAD_FILE) as tmp:
         tmp.write_text(json.dumps(record, indent=1))
     return record
+
+
+def drop_spread(scene_dir: str | Path, reference_dir: str) -> None:
+    """Remove the reruns and ``spread.json`` of a reference that is about to be made again."""
+    folder = Path(scene_dir) / reference_dir
+    for run in folder.glob("seed*"):
+        if run.is_dir() and run.name[4:].isdigit():
+            shutil.rmtree(run)
+    (folder / SPREAD_FILE).unlink(missing_ok=True)
 
 
 def load_spread(scene_dir: str | Path, reference_dir: str) -> dict[str, Any] | None:

@@ -155,6 +155,11 @@ def test_reference_spread_is_measured_kept_and_dropped_with_its_reference(photos
     data["length"] = 2 * data["length"]
     (out / "reference.json").write_text(json.dumps(data))
     assert (out / REFERENCE_DIR / SPREAD_FILE).is_file() and load_spread(out, REFERENCE_DIR) is None
+    # a reference made again with other options drops the reruns made for the old one
+    simulate_scene(
+        photos / "photos", out, frames=3, noise="gaussian:10", progress=False, reference_options={"single_camera": True}
+    )
+    assert not (out / REFERENCE_DIR / "seed1").exists() and not (out / REFERENCE_DIR / SPREAD_FILE).exists()
 
 
 def test_reference_spread_refuses_bad_seeds(photos):
