@@ -20,11 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
+from lburst.scenes.photo_scene import REFERENCE_DIR
 from lburst.sfm.poses import camera_to_world, trajectory_errors, umeyama
 from lburst.sfm.reference import Reference
 from lburst.sfm.result import RESULT_FILE, ReconstructionResult
-
-REFERENCE_DIR = ".reference"
 
 
 def ate(poses: dict, reference: dict) -> float | None:
