@@ -36,6 +36,7 @@ import numpy as np
 
 from lburst.burst.io import atomic_path, file_sha1
 from lburst.errors import LBurstValueError
+from lburst.numbers import check_integer
 from lburst.sfm.metrics import reference_length
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.poses import trajectory_errors
@@ -60,9 +61,9 @@ def reference_spread(
     ``method``, ``reference_dir`` and ``options`` are those the reference was made with
     (:mod:`lburst.scenes.photo_scene`); ``options`` must not hold ``seed``.
     """
-    seeds = list(dict.fromkeys(seeds))
-    if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
-        raise LBurstValueError(f"reference seeds: non-negative integers, got {seeds}")
+    seeds = list(dict.fromkeys(check_integer(s, "a reference seed", low=0) for s in seeds))
+    if not seeds:
+        raise LBurstValueError("reference seeds: give at least one")
     scene_dir = Path(scene_dir)
     folder = scene_dir / reference_dir
     reference_file = scene_dir / "reference.json"

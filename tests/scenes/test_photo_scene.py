@@ -167,5 +167,5 @@ def test_reference_spread_refuses_bad_seeds(photos):
     from lburst.scenes.reference_spread import reference_spread
 
     for seeds in ([], [-1], [True]):
-        with pytest.raises(LBurstValueError, match="reference seeds"):
+        with pytest.raises(LBurstValueError, match="reference seed"):
             reference_spread(photos / "photos", photos / "nowhere", seeds, "sift", ".reference", {}, progress=False)
