@@ -21,9 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from lburst.scenes.photo_scene import REFERENCE_DIR
+from lburst.scenes.reference_spread import rerun_folders
 from lburst.sfm.poses import camera_to_world, trajectory_errors, umeyama
 from lburst.sfm.reference import Reference
 from lburst.sfm.result import RESULT_FILE, ReconstructionResult
+from lburst.sfm.scene import REFERENCE_FILE
 
 
 def ate(poses: dict, reference: dict) -> float | None:
@@ -49,8 +51,8 @@ def main() -> None:
     parser.add_argument("runs", nargs="+", type=Path, help="benchmark run folders (each with result.json)")
     parser.add_argument("--out", type=Path, help="write the table as JSON here")
     args = parser.parse_args()
-    references = {"reference": Reference.load(args.scene / "reference.json").poses}
-    for folder in sorted((args.scene / REFERENCE_DIR).glob("seed*"), key=lambda p: int(p.name[4:])):
+    references = {"reference": Reference.load(args.scene / REFERENCE_FILE).poses}
+    for folder in rerun_folders(args.scene / REFERENCE_DIR).values():
         if (folder / RESULT_FILE).is_file():
             references[folder.name] = ReconstructionResult.load(folder / RESULT_FILE).poses
     rows = {}

@@ -43,8 +43,20 @@ from lburst.sfm.poses import trajectory_errors
 from lburst.sfm.reconstruct import reconstruct_scene
 from lburst.sfm.reference import Reference
 from lburst.sfm.result import RESULT_FILE, ReconstructionResult
+from lburst.sfm.scene import REFERENCE_FILE
 
 SPREAD_FILE = "spread.json"
+RERUN_PREFIX = "seed"  # a rerun's folder: <reference folder>/seed<S>
+
+
+def rerun_folders(folder: str | Path) -> dict[int, Path]:
+    """Seed -> folder of every rerun kept in the reference folder ``folder``, by seed."""
+    found = {}
+    for path in Path(folder).glob(f"{RERUN_PREFIX}*"):
+        tail = path.name[len(RERUN_PREFIX) :]
+        if path.is_dir() and tail.isdigit():
+            found[int(tail)] = path
+    return dict(sorted(found.items()))
 
 
 def reference_spread(
@@ -66,12 +78,13 @@ def reference_spread(
         raise LBurstValueError("reference seeds: give at least one")
     scene_dir = Path(scene_dir)
     folder = scene_dir / reference_dir
-    reference_file = scene_dir / "reference.json"
+    reference_file = scene_dir / REFERENCE_FILE
     reference = Reference.load(reference_file)
     names = list(reference.poses)
+    length = reference_length(reference, names)
     runs = []
     for seed in seeds:
-        out = folder / f"seed{seed}"
+        out = folder / f"{RERUN_PREFIX}{seed}"
         if (out / RESULT_FILE).is_file():
             result = ReconstructionResult.load(out / RESULT_FILE)
         else:
@@ -83,7 +96,7 @@ def reference_spread(
             errors = trajectory_errors(
                 [result.poses[n] for n in common],
                 [reference.poses[n] for n in common],
-                length=reference_length(reference, names),
+                length=length,
             )
             run.update({k: errors[k] for k in ("ate_rmse", "ate_percent", "ate_max") if k in errors})
         runs.append(run)
@@ -96,16 +109,15 @@ def reference_spread(
 def drop_spread(scene_dir: str | Path, reference_dir: str) -> None:
     """Remove the reruns and ``spread.json`` of a reference that is about to be made again."""
     folder = Path(scene_dir) / reference_dir
-    for run in folder.glob("seed*"):
-        if run.is_dir() and run.name[4:].isdigit():
-            shutil.rmtree(run)
+    for run in rerun_folders(folder).values():
+        shutil.rmtree(run)
     (folder / SPREAD_FILE).unlink(missing_ok=True)
 
 
 def load_spread(scene_dir: str | Path, reference_dir: str) -> dict[str, Any] | None:
     """The scene's ``spread.json``, or ``None`` when absent or made for another ``reference.json``."""
     scene_dir = Path(scene_dir)
-    path, reference_file = scene_dir / reference_dir / SPREAD_FILE, scene_dir / "reference.json"
+    path, reference_file = scene_dir / reference_dir / SPREAD_FILE, scene_dir / REFERENCE_FILE
     if not (path.is_file() and reference_file.is_file()):
         return None
     try:
