@@ -130,6 +130,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)",
     )
     p.add_argument(
+        "--ema-decay",
+        type=real(0, 1),
+        metavar="D",
+        help="also keep a moving average of the weights, over about 1/(1-D) steps (snapshots/*.ema.pt, "
+        "final.pt); below 1, default 0: none",
+    )
+    p.add_argument(
         "--arch",
         help="network: lburst (Fast-Quad-L2-Net), lite (the light network), or a light network of other widths, "
         "e.g. 'LBurstLite(fine=48,coarse=128,dilations=1-2-4-8)'",
@@ -170,6 +177,7 @@ def given_options(args: argparse.Namespace) -> dict:
         "ap_border": args.ap_border,
         "distill_weight": args.distill_weight,
         "spread_weight": args.spread_weight,
+        "ema_decay": args.ema_decay,
         "arch": args.arch,
         "teacher": args.teacher,
         "teacher_sees": args.teacher_sees,

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
@@ -107,6 +108,14 @@ class TrainConfig:
     ``snapshots/step_XXXXXX.pt`` in the published layout (a few MB each), so the
     benchmark can follow a run's progress.
 
+    ``ema_decay`` above 0 also keeps an exponential moving average of the weights
+    (:class:`torch.optim.swa_utils.AveragedModel`, buffers included), updated after every
+    step: ``w_ema <- ema_decay * w_ema + (1 - ema_decay) * w``, over about
+    ``1 / (1 - ema_decay)`` steps.  A fine-tune's snapshots a hundred steps apart differ by
+    several points of MMA and a third of their keypoints; the average is meant to keep what
+    the steps agree on.  Each snapshot then also writes ``step_XXXXXX.ema.pt``, ``final.pt``
+    holds the average, and ``last.pt`` keeps it for a resume.  0 (the default) keeps none.
+
     ``distill_weight`` adds ``distill_weight * distillation_loss``: the network on burst A
     without noise, in eval mode and without gradient, is the teacher of the network on
     the noisy burst A at every pixel (descriptors and both maps), so every step teaches
@@ -157,6 +166,7 @@ class TrainConfig:
     ap_border: int = 16
     distill_weight: float = 0.0
     spread_weight: float = 0.0
+    ema_decay: float = 0.0
     arch: str = "lburst"
     teacher: str | None = None
     teacher_sees: str = "noisy"
@@ -385,7 +395,17 @@ def _to_cpu(obj):
     return obj
 
 
-def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds: float, generator) -> None:
+def weight_average(net: torch.nn.Module, decay: float) -> AveragedModel | None:
+    """The exponential moving average of ``net``'s weights and buffers (``decay`` in [0, 1);
+    0: none).  Its first update copies ``net``."""
+    if not 0.0 <= decay < 1.0:
+        raise LBurstValueError(f"ema_decay {decay}: use a value in [0, 1) (0: no average)")
+    if decay == 0.0:
+        return None
+    return AveragedModel(net, multi_avg_fn=get_ema_multi_avg_fn(decay), use_buffers=True)
+
+
+def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds: float, generator, ema=None) -> None:
     state = {
         **checkpoint_dict(net),
         "optimizer": _to_cpu(optimizer.state_dict()),
@@ -395,6 +415,8 @@ def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds:
         "torch_rng": torch.get_rng_state(),
         "generator": generator.get_state(),
     }
+    if ema is not None:
+        state["ema"] = _to_cpu(ema.state_dict())
     write_checkpoint(state, path)
 
 
@@ -476,9 +498,14 @@ def train(
     if lite_distillation:
         teacher = teacher_form(teacher, cfg.precision).to(device)
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    ema = weight_average(net, cfg.ema_decay)
     if state is not None:
         net.load_state_dict(state["state_dict"])
         optimizer.load_state_dict(state["optimizer"])
+        if ema is not None:
+            if "ema" not in state:
+                raise CheckpointError(f"{last}: the run keeps no weight average (ema_decay {cfg.ema_decay})")
+            ema.load_state_dict(state["ema"])
         step, seconds = int(state["step"]), float(state["seconds"])
         torch.set_rng_state(state["torch_rng"])
         if ctx.main:  # the saved sampling state is rank 0's; the others start anew from their seed
@@ -505,7 +532,7 @@ def train(
 
     def checkpoint() -> None:  # rank 0: the log, then the resumable state, atomically
         _write_log(out / "log.csv", log)  # first: a resume reads the log only up to the state's step
-        save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator)
+        save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator, ema)
 
     bar = tqdm(
         total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main), dynamic_ncols=True
@@ -553,6 +580,8 @@ def train(
             losses["loss"].backward()
             if finite_gradients(net):
                 optimizer.step()
+                if ema is not None:
+                    ema.update_parameters(net)
             else:  # one bad batch must not leave NaN weights behind: skip its update, say so in the log
                 skipped += 1
                 bar.write(f"step {step + 1}: non-finite loss or gradient, update skipped ({skipped} so far)")
@@ -573,7 +602,11 @@ def train(
                 for k in losses:
                     writer.add_scalar(f"train/{k}", values[k], step)
             if cfg.snapshot_every and step % cfg.snapshot_every == 0:
-                save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta={"step": step, **_input_meta(cfg)})
+                meta = {"step": step, **_input_meta(cfg)}
+                save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta=meta)
+                if ema is not None:
+                    average = {**meta, "ema_decay": cfg.ema_decay}
+                    save_checkpoint(ema.module, out / "snapshots" / f"step_{step:06d}.ema.pt", meta=average)
             if time.monotonic() - last_save > cfg.checkpoint_every_s:
                 checkpoint()
                 last_save = time.monotonic()
@@ -588,7 +621,10 @@ def train(
     if ctx.main:
         checkpoint()
         if step >= total:
-            save_checkpoint(net, out / "final.pt", meta={"step": step, "config": _config_dict(cfg), **_input_meta(cfg)})
+            final = net if ema is None else ema.module
+            save_checkpoint(
+                final, out / "final.pt", meta={"step": step, "config": _config_dict(cfg), **_input_meta(cfg)}
+            )
     if writer is not None:
         writer.close()
     ctx.close()

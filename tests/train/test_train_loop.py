@@ -410,3 +410,27 @@ def test_a_teacher_on_the_clean_burst_is_frozen_and_needs_a_teacher(photos, tmp_
         train([photos], tmp_path / "x", replace(base, teacher_sees="clean", distill_weight=1.0), progress=False)
     with pytest.raises(ValueError, match="teacher_sees 'blurry'"):
         train([photos], tmp_path / "y", replace(cfg, teacher_sees="blurry"), progress=False)
+
+
+def test_weight_average_follows_the_steps_and_survives_a_resume(photos, tmp_path):
+    decay = 0.5
+    cfg = TrainConfig(frames=3, batch_size=2, steps=4, patch=8, workers=0, pair=TINY, snapshot_every=1, ema_decay=decay)
+    train([photos], tmp_path / "full", cfg, progress=False)
+    train([photos], tmp_path / "split", replace(cfg, steps=2), progress=False)
+    train([photos], tmp_path / "split", cfg, resume=True, progress=False)
+    snaps = tmp_path / "full" / "snapshots"
+    raw = [load_checkpoint(snaps / f"step_{s:06d}.pt")[0].state_dict() for s in range(1, 5)]
+    expected = dict(raw[0])  # the first update copies the weights
+    for w in raw[1:]:
+        expected = {k: decay * v + (1 - decay) * w[k] if v.is_floating_point() else w[k] for k, v in expected.items()}
+    averaged, _ = load_checkpoint(snaps / "step_000004.ema.pt")
+    final, _ = load_checkpoint(tmp_path / "full" / "final.pt")
+    resumed, _ = load_checkpoint(tmp_path / "split" / "final.pt")
+    for k, v in averaged.state_dict().items():
+        if v.is_floating_point():
+            torch.testing.assert_close(v, expected[k], atol=1e-6, rtol=1e-6, msg=k)
+        torch.testing.assert_close(final.state_dict()[k], v, atol=0, rtol=0, msg=k)
+        torch.testing.assert_close(resumed.state_dict()[k], v, atol=1e-4, rtol=1e-4, msg=k)
+    assert any(not torch.equal(v, raw[3][k]) for k, v in averaged.state_dict().items())  # not the last step's
+    with pytest.raises(ValueError, match="ema_decay 1.0"):
+        train([photos], tmp_path / "bad", replace(cfg, ema_decay=1.0), progress=False)
