@@ -18,7 +18,12 @@ pixels.  Tables, one row per method:
   pose; a pair's error is the larger of the rotation's and the translation direction's
   angular errors (180 degrees where the estimate fails), summarised as the area under its
   cumulative curve to 5, 10 and 20 degrees (the pose AUC of SuperGlue's and LightGlue's
-  evaluations): a measure of pose without COLMAP's run-to-run spread.
+  evaluations): a measure of pose without COLMAP's run-to-run spread;
+- on a rendered flight (a scene with ``night_flight.json``), the full image error as well:
+  each keypoint of the earlier image goes to 3D at the renderer's depth and is projected into
+  the later image, so a match that slides along its epipolar line, which the Sampson distance
+  and a geometric verification cannot see, is counted (``along_line``: under 4 px from the
+  line, over 8 px from the point), and the right matches of every pair are listed.
 
     python scripts/match_errors.py outputs/scenes/sacre_coeur_g50 \
         outputs/recon_seeds_g50/lburst_*/sacre_coeur_g50 outputs/recon_seeds_g50/B5.pt*/sacre_coeur_g50 \
@@ -37,6 +42,8 @@ import numpy as np
 import pycolmap
 
 from lburst.errors import LBurstValueError
+from lburst.scenes.night_flight import CONFIG_FILE, NightFlightConfig, make_city, render_view
+from lburst.scenes.raycast import intrinsics
 from lburst.sfm.reference import Reference
 from lburst.sfm.scene import reference_cameras
 
@@ -82,6 +89,39 @@ def sampson_px(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray) -
     return np.sqrt(d2) * np.sqrt(cameras[a].params[0] * cameras[b].params[0])
 
 
+def rendered_depths(scene: Path, poses) -> dict | None:
+    """Z-depth (H, W) of every reference image of a rendered flight, and its intrinsics;
+    ``None`` for a scene without ``night_flight.json`` (a photo set)."""
+    path = scene / CONFIG_FILE
+    if not path.is_file():
+        return None
+    cfg = NightFlightConfig.from_dict(json.loads(path.read_text()))
+    city = make_city(cfg)
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    depth = {name: render_view(city, K, R, t, cfg.width, cfg.height)[1] for name, (R, t) in poses.items()}
+    return {"K": K, "depth": depth}
+
+
+def transfer_px(truth: dict, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray) -> np.ndarray:
+    """Full image error (px) of matches ka <-> kb: ``kb`` against ``ka`` taken to 3D at the
+    renderer's depth and projected into ``b``.  NaN where the depth is not one surface (the
+    sky, or within 1 % of a depth edge in the 3x3 pixels around the keypoint)."""
+    depth, K = truth["depth"][a], truth["K"]
+    h, w = depth.shape
+    x = np.clip(np.round(ka[:, 0]).astype(int), 1, w - 2)
+    y = np.clip(np.round(ka[:, 1]).astype(int), 1, h - 2)
+    z = depth[y, x]
+    around = np.stack([depth[y + dy, x + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)])
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(z) & (np.abs(around - z).max(0) < 0.01 * z)
+    uv = np.c_[ka.astype(np.float64) + 0.5, np.ones(len(ka))]  # keypoint centres at integers, the renderer's at +0.5
+    rot, t = relative_pose(poses, a, b)
+    cam_b = (uv @ np.linalg.inv(K).T * np.where(valid, z, 1.0)[:, None]) @ rot.T + t
+    proj = cam_b @ K.T
+    error = np.linalg.norm(kb - (proj[:, :2] / proj[:, 2:3] - 0.5), axis=1)
+    return np.where(valid & (cam_b[:, 2] > 0), error, np.nan)
+
+
 def relative_pose_error(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray, seed: int = 0) -> float:
     """Degrees: the larger angular error of the rotation and of the translation direction of
     the pose that COLMAP's LO-RANSAC (``pycolmap.estimate_essential_matrix``, ``POSE_PX``,
@@ -118,9 +158,10 @@ def pose_auc(errors: list[float], limits=AUC_DEG) -> dict:
     return out
 
 
-def putative_matches(run: Path, cameras, poses, pose_seeds: int = POSE_SEEDS) -> dict:
-    """Per pair (a, b): keypoints of both sides, the lower score, and the error in px; and the
-    relative pose errors of every pair under RANSAC seeds ``0 .. pose_seeds - 1``."""
+def putative_matches(run: Path, cameras, poses, pose_seeds: int = POSE_SEEDS, truth: dict | None = None) -> dict:
+    """Per pair (a, b): keypoints of both sides, the lower score, the error in px, and (with
+    ``truth``, :func:`rendered_depths`) the full image error; and the relative pose errors of
+    every pair under RANSAC seeds ``0 .. pose_seeds - 1``."""
     out, pose_errors = {}, []
     with h5py.File(run / "features.h5", "r") as feats:  # each image's keypoints and scores, read once
         kps = {name: feats[name]["keypoints"][()] for name in feats}
@@ -133,7 +174,10 @@ def putative_matches(run: Path, cameras, poses, pose_seeds: int = POSE_SEEDS) ->
                 ka, kb = kps[a][i], kps[b][m[i]]
                 score = np.minimum(scores[a][i], scores[b][m[i]])
                 na, nb = Path(a).stem, Path(b).stem
-                out[tuple(sorted((na, nb)))] = (ka, kb, score, sampson_px(cameras, poses, na, nb, ka, kb))
+                if nb < na:  # the earlier image first, so the full error is measured in the later one
+                    na, nb, ka, kb = nb, na, kb, ka
+                full = None if truth is None else transfer_px(truth, poses, na, nb, ka, kb)
+                out[(na, nb)] = (ka, kb, score, sampson_px(cameras, poses, na, nb, ka, kb), full)
                 pose_errors += [relative_pose_error(cameras, poses, na, nb, ka, kb, seed) for seed in range(pose_seeds)]
     return {"pairs": out, "scores": np.concatenate(list(scores.values())), "pose_errors": pose_errors}
 
@@ -158,12 +202,30 @@ def by_gap(run: dict, order: list[str]) -> dict:
     """Right matches (and those under 1 px) summed over the pairs ``gap`` images apart in ``order``."""
     rank = {name: i for i, name in enumerate(order)}
     gaps: dict[int, dict] = {}
-    for (a, b), (_, _, _, errors) in run["pairs"].items():
+    for (a, b), (_, _, _, errors, _) in run["pairs"].items():
         row = gaps.setdefault(abs(rank[a] - rank[b]), {"pairs": 0, "right": 0, "under_1px": 0})
         row["pairs"] += 1
         row["right"] += int(np.sum(errors < RIGHT_PX))
         row["under_1px"] += int(np.sum(errors < 1.0))
     return {str(g): gaps[g] for g in sorted(gaps)}
+
+
+def full_error_summary(run: dict, order: list[str]) -> dict:
+    """On a rendered flight: matches judged by their full image error, by the pair's gap, and
+    the right ones of every pair (``"a b"``)."""
+    rank = {name: i for i, name in enumerate(order)}
+    gaps: dict[int, dict] = {}
+    pairs = {}
+    for (a, b), (_, _, _, sampson, full) in run["pairs"].items():
+        right = full < RIGHT_PX
+        row = gaps.setdefault(abs(rank[a] - rank[b]), {"measured": 0, "right": 0, "under_1px": 0, "along_line": 0})
+        row["measured"] += int(np.isfinite(full).sum())
+        row["right"] += int(right.sum())
+        row["under_1px"] += int((full < 1.0).sum())
+        row["along_line"] += int(((sampson < RIGHT_PX) & (full > WRONG_PX)).sum())
+        pairs[f"{a} {b}"] = int(right.sum())
+    total = {k: sum(g[k] for g in gaps.values()) for k in ("measured", "right", "under_1px", "along_line")}
+    return {**total, "by_gap": {str(g): gaps[g] for g in sorted(gaps)}, "by_pair": pairs}
 
 
 def summary(run: dict, scales: dict, order: list[str]) -> dict:
@@ -198,6 +260,7 @@ def summary(run: dict, scales: dict, order: list[str]) -> dict:
         ],
         "by_scale": by_scale,
         "by_gap": by_gap(run, order),
+        **({"full_error": full_error_summary(run, order)} if next(iter(run["pairs"].values()))[4] is not None else {}),
         **(
             {"pose_auc": pose_auc(run["pose_errors"]), "pose_median_deg": float(np.median(run["pose_errors"]))}
             if run["pose_errors"]
@@ -233,7 +296,8 @@ def main() -> None:
         p.error(str(err))
     if args.pose_seeds < 0:
         p.error(f"--pose-seeds must be >= 0, got {args.pose_seeds}")
-    runs = [putative_matches(r, cameras, poses, args.pose_seeds) for r in args.runs]
+    truth = rendered_depths(args.scene, poses)
+    runs = [putative_matches(r, cameras, poses, args.pose_seeds, truth) for r in args.runs]
     scales = pair_scales(runs)
     order = sorted(poses)
     results = {label: summary(run, scales, order) for label, run in zip(labels, runs)}
@@ -259,6 +323,13 @@ def main() -> None:
     for label, r in results.items():
         cells = [r["by_gap"].get(g, {"right": 0, "under_1px": 0}) for g in gaps]
         print(f"| {label} | " + " | ".join(f"{c['right']} ({c['under_1px']})" for c in cells) + " |")
+    if truth is not None:
+        print("\nfull image error at the renderer's depth, by the pair's gap: right (under 1 px) / along the line\n")
+        print("| method | " + " | ".join(gaps) + " |\n|---|" + "---|" * len(gaps))
+        for label, r in results.items():
+            cells = [r["full_error"]["by_gap"].get(g) for g in gaps]
+            text = [f"{c['right']} ({c['under_1px']}) / {c['along_line']}" if c else "" for c in cells]
+            print(f"| {label} | " + " | ".join(text) + " |")
     if args.pose_seeds:
         print(f"\nrelative pose (LO-RANSAC at {POSE_PX:g} px, {args.pose_seeds} seeds a pair), AUC and median error:\n")
         print("| method | pairs | " + " | ".join(f"AUC@{d}" for d in AUC_DEG) + " | median (deg) |")

@@ -91,3 +91,36 @@ def test_a_wrong_relative_pose_is_measured_in_degrees_and_the_auc_follows_its_cu
     # trapezoids under the curve through (0, 1/4), (2, 2/4), (4, 3/4), flat to the limit (as SuperGlue's)
     assert auc["5"] == pytest.approx((2 * 0.375 + 2 * 0.625 + 1 * 0.75) / 5)
     assert auc["20"] == pytest.approx((2 * 0.375 + 2 * 0.625 + 16 * 0.75) / 20)
+
+
+def test_on_a_rendered_flight_a_match_sliding_along_its_epipolar_line_is_caught():
+    """At the renderer's depth, true matches have no full error; a match to the point of the
+    same ray at another depth lies on its epipolar line (no Sampson error) but is far off."""
+    me = _script()
+    import pycolmap
+
+    cameras = {n: pycolmap.Camera(**CAMERA) for n in "ab"}
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    depth = np.full((480, 640), 8.0)
+    depth[:, 600:] = np.inf  # sky: no surface to measure against
+    truth = {"K": K, "depth": {"a": depth, "b": depth}}
+    rng = np.random.default_rng(2)
+    ka = np.c_[rng.uniform(20, 580, 100), rng.uniform(20, 460, 100)]
+    ka[-5:, 0] = 620  # in the sky
+    rot, t = POSES["b"]
+
+    def seen_in_b(z: float) -> np.ndarray:
+        cam = (np.c_[ka + 0.5, np.ones(len(ka))] @ np.linalg.inv(K).T * z) @ rot.T + t
+        return (cam @ K.T)[:, :2] / (cam @ K.T)[:, 2:] - 0.5
+
+    kb = seen_in_b(8.0)
+    kb[:30] = seen_in_b(5.0)[:30]  # the same ray, 3 m nearer: on the epipolar line, 20-60 px away
+    full = me.transfer_px(truth, POSES, "a", "b", ka, kb)
+    sampson = me.sampson_px(cameras, POSES, "a", "b", ka + 0.5, kb + 0.5)
+    assert np.isnan(full[-5:]).all()
+    np.testing.assert_allclose(full[30:95], 0, atol=1e-6)
+    assert (full[:30] > me.WRONG_PX).all() and (sampson[:30] < 1e-3).all()
+    run = {"pairs": {("a", "b"): (ka, kb, np.ones(100), sampson, full)}}
+    found = me.full_error_summary(run, ["a", "b"])
+    assert found["measured"] == 95 and found["right"] == 65 and found["along_line"] == 30
+    assert found["by_gap"]["1"]["along_line"] == 30 and found["by_pair"] == {"a b": 65}
