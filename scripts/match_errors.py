@@ -12,7 +12,9 @@ pixels.  Tables, one row per method:
 - by scale change: right matches summed over the pairs whose scale change (a similarity
   fitted to the right matches of all methods together) lies in each band;
 - by gap (a sequence: a flight, a walk): right matches, and those under 1 px, summed over the
-  pairs that lie 1, 2, ... images apart in name order, the baseline growing with the gap;
+  pairs that lie 1, 2, ... images apart in name order, the baseline growing with the gap, and
+  their coverage: the share of the later image's 40-px cells that hold a right match, averaged
+  over the pairs (matches bunched in a few places hold a pose less well than as many spread out);
 - relative pose: the essential matrix of every pair's putative matches (COLMAP's LO-RANSAC
   at ``POSE_PX`` px, once per RANSAC seed, ``--pose-seeds``) against the reference relative
   pose; a pair's error is the larger of the rotation's and the translation direction's
@@ -51,6 +53,7 @@ RIGHT_PX, WRONG_PX = 4.0, 8.0
 ERROR_EDGES = (0.5, 1.0, 2.0, 4.0)
 SCALE_BANDS = ((1.0, 1.2), (1.2, 1.5), (1.5, np.inf))
 MIN_FIT = 30  # right matches needed to fit a pair's similarity
+CELL_PX = 40  # the grid of the coverage: the share of these cells of the later image that hold a right match
 POSE_PX = 1.0  # RANSAC threshold of the relative pose, in pixels
 AUC_DEG = (5, 10, 20)
 POSE_SEEDS = 5  # RANSAC seeds by default: every pair's pose is estimated once per seed
@@ -179,7 +182,15 @@ def putative_matches(run: Path, cameras, poses, pose_seeds: int = POSE_SEEDS, tr
                 full = None if truth is None else transfer_px(truth, poses, na, nb, ka, kb)
                 out[(na, nb)] = (ka, kb, score, sampson_px(cameras, poses, na, nb, ka, kb), full)
                 pose_errors += [relative_pose_error(cameras, poses, na, nb, ka, kb, seed) for seed in range(pose_seeds)]
-    return {"pairs": out, "scores": np.concatenate(list(scores.values())), "pose_errors": pose_errors}
+    sizes = {name: (int(c.width), int(c.height)) for name, c in cameras.items()}
+    return {"pairs": out, "scores": np.concatenate(list(scores.values())), "pose_errors": pose_errors, "sizes": sizes}
+
+
+def coverage(points: np.ndarray, size: tuple[int, int]) -> float:
+    """The share of the ``CELL_PX`` cells of an image of ``size`` (width, height) holding a point."""
+    cols, rows = -(-size[0] // CELL_PX), -(-size[1] // CELL_PX)
+    cells = {(int(x // CELL_PX), int(y // CELL_PX)) for x, y in points}
+    return len(cells) / (cols * rows)
 
 
 def pair_scales(runs: list[dict]) -> dict:
@@ -202,11 +213,14 @@ def by_gap(run: dict, order: list[str]) -> dict:
     """Right matches (and those under 1 px) summed over the pairs ``gap`` images apart in ``order``."""
     rank = {name: i for i, name in enumerate(order)}
     gaps: dict[int, dict] = {}
-    for (a, b), (_, _, _, errors, _) in run["pairs"].items():
-        row = gaps.setdefault(abs(rank[a] - rank[b]), {"pairs": 0, "right": 0, "under_1px": 0})
+    for (a, b), (_, kb, _, errors, _) in run["pairs"].items():
+        row = gaps.setdefault(abs(rank[a] - rank[b]), {"pairs": 0, "right": 0, "under_1px": 0, "coverage": 0.0})
         row["pairs"] += 1
         row["right"] += int(np.sum(errors < RIGHT_PX))
         row["under_1px"] += int(np.sum(errors < 1.0))
+        row["coverage"] += coverage(kb[errors < RIGHT_PX], run["sizes"][b])
+    for row in gaps.values():
+        row["coverage"] /= row["pairs"]
     return {str(g): gaps[g] for g in sorted(gaps)}
 
 
@@ -216,14 +230,20 @@ def full_error_summary(run: dict, order: list[str]) -> dict:
     rank = {name: i for i, name in enumerate(order)}
     gaps: dict[int, dict] = {}
     pairs = {}
-    for (a, b), (_, _, _, sampson, full) in run["pairs"].items():
+    for (a, b), (_, kb, _, sampson, full) in run["pairs"].items():
         right = full < RIGHT_PX
-        row = gaps.setdefault(abs(rank[a] - rank[b]), {"measured": 0, "right": 0, "under_1px": 0, "along_line": 0})
+        row = gaps.setdefault(
+            abs(rank[a] - rank[b]), {"pairs": 0, "measured": 0, "right": 0, "under_1px": 0, "along_line": 0}
+        )
+        row["pairs"] += 1
+        row["coverage"] = row.get("coverage", 0.0) + coverage(kb[right], run["sizes"][b])
         row["measured"] += int(np.isfinite(full).sum())
         row["right"] += int(right.sum())
         row["under_1px"] += int((full < 1.0).sum())
         row["along_line"] += int(((sampson < RIGHT_PX) & (full > WRONG_PX)).sum())
         pairs[f"{a} {b}"] = int(right.sum())
+    for row in gaps.values():
+        row["coverage"] /= row["pairs"]
     total = {k: sum(g[k] for g in gaps.values()) for k in ("measured", "right", "under_1px", "along_line")}
     return {**total, "by_gap": {str(g): gaps[g] for g in sorted(gaps)}, "by_pair": pairs}
 
@@ -318,17 +338,23 @@ def main() -> None:
     for label, r in results.items():
         print(f"| {label} | " + " | ".join(f"{b['right']} ({b['pairs']} pairs)" for b in r["by_scale"]) + " |")
     gaps = sorted({g for r in results.values() for g in r["by_gap"]}, key=int)
-    print("\nright matches (under 1 px) by the pair's gap in name order, for a sequence:\n")
+    print(f"\nright matches (under 1 px), and their coverage of {CELL_PX}-px cells, by the pair's gap in name order:\n")
     print("| method | " + " | ".join(gaps) + " |\n|---|" + "---|" * len(gaps))
     for label, r in results.items():
-        cells = [r["by_gap"].get(g, {"right": 0, "under_1px": 0}) for g in gaps]
-        print(f"| {label} | " + " | ".join(f"{c['right']} ({c['under_1px']})" for c in cells) + " |")
+        cells = [r["by_gap"].get(g, {"right": 0, "under_1px": 0, "coverage": 0.0}) for g in gaps]
+        print(
+            f"| {label} | " + " | ".join(f"{c['right']} ({c['under_1px']}), {c['coverage']:.3f}" for c in cells) + " |"
+        )
     if truth is not None:
-        print("\nfull image error at the renderer's depth, by the pair's gap: right (under 1 px) / along the line\n")
+        print(
+            "\nfull image error at the renderer's depth, by the pair's gap: right (under 1 px), coverage / along the line\n"
+        )
         print("| method | " + " | ".join(gaps) + " |\n|---|" + "---|" * len(gaps))
         for label, r in results.items():
             cells = [r["full_error"]["by_gap"].get(g) for g in gaps]
-            text = [f"{c['right']} ({c['under_1px']}) / {c['along_line']}" if c else "" for c in cells]
+            text = [
+                f"{c['right']} ({c['under_1px']}), {c['coverage']:.3f} / {c['along_line']}" if c else "" for c in cells
+            ]
             print(f"| {label} | " + " | ".join(text) + " |")
     if args.pose_seeds:
         print(f"\nrelative pose (LO-RANSAC at {POSE_PX:g} px, {args.pose_seeds} seeds a pair), AUC and median error:\n")

@@ -120,7 +120,16 @@ def test_on_a_rendered_flight_a_match_sliding_along_its_epipolar_line_is_caught(
     assert np.isnan(full[-5:]).all()
     np.testing.assert_allclose(full[30:95], 0, atol=1e-6)
     assert (full[:30] > me.WRONG_PX).all() and (sampson[:30] < 1e-3).all()
-    run = {"pairs": {("a", "b"): (ka, kb, np.ones(100), sampson, full)}}
+    run = {"pairs": {("a", "b"): (ka, kb, np.ones(100), sampson, full)}, "sizes": {"a": (640, 480), "b": (640, 480)}}
     found = me.full_error_summary(run, ["a", "b"])
     assert found["measured"] == 95 and found["right"] == 65 and found["along_line"] == 30
     assert found["by_gap"]["1"]["along_line"] == 30 and found["by_pair"] == {"a b": 65}
+    cells = {(int(x // 40), int(y // 40)) for x, y in kb[30:95]}  # the right ones, in b
+    assert found["by_gap"]["1"]["coverage"] == pytest.approx(len(cells) / (16 * 12))
+
+
+def test_coverage_counts_the_cells_that_hold_a_point_partial_cells_included():
+    me = _script()
+    points = np.array([[1.0, 1.0], [39.9, 39.9], [40.0, 0.0], [99.0, 59.0]])  # cells (0,0) twice, (1,0), (2,1)
+    assert me.coverage(points, (100, 60)) == pytest.approx(3 / (3 * 2))
+    assert me.coverage(np.zeros((0, 2)), (100, 60)) == 0.0
