@@ -6,7 +6,8 @@ the scene's ``reference.json`` (its cameras, with their distortion, and poses) i
 pixels.  Tables, one row per method:
 
 - errors: the share of putative matches under 0.5, 1, 2 and 4 px and over 8 px (a match
-  under 4 px is counted right, one over 8 px wrong);
+  under 4 px is counted right, one over 8 px wrong), and how bunched the keypoints are: the
+  share of an image's keypoints in its densest tenth of 40-px cells, averaged over the images;
 - by keypoint score: right and wrong matches among the keypoints of each score quartile of
   the method's own keypoints (a match's score: the lower of its two keypoints');
 - by scale change: right matches summed over the pairs whose scale change (a similarity
@@ -183,7 +184,23 @@ def putative_matches(run: Path, cameras, poses, pose_seeds: int = POSE_SEEDS, tr
                 out[(na, nb)] = (ka, kb, score, sampson_px(cameras, poses, na, nb, ka, kb), full)
                 pose_errors += [relative_pose_error(cameras, poses, na, nb, ka, kb, seed) for seed in range(pose_seeds)]
     sizes = {name: (int(c.width), int(c.height)) for name, c in cameras.items()}
-    return {"pairs": out, "scores": np.concatenate(list(scores.values())), "pose_errors": pose_errors, "sizes": sizes}
+    bunching = float(np.mean([densest_tenth(kps[n], sizes[Path(n).stem]) for n in kps if Path(n).stem in sizes]))
+    return {
+        "pairs": out,
+        "scores": np.concatenate(list(scores.values())),
+        "pose_errors": pose_errors,
+        "sizes": sizes,
+        "densest_tenth": bunching,
+    }
+
+
+def densest_tenth(points: np.ndarray, size: tuple[int, int]) -> float:
+    """The share of an image's keypoints that lie in its densest tenth of ``CELL_PX`` cells
+    (0.1 for keypoints spread evenly)."""
+    cols, rows = -(-size[0] // CELL_PX), -(-size[1] // CELL_PX)
+    cell = np.clip(points[:, 0] // CELL_PX, 0, cols - 1) * rows + np.clip(points[:, 1] // CELL_PX, 0, rows - 1)
+    counts = np.sort(np.bincount(cell.astype(int), minlength=cols * rows))[::-1]
+    return float(counts[: max(1, round(0.1 * cols * rows))].sum() / max(1, len(points)))
 
 
 def coverage(points: np.ndarray, size: tuple[int, int]) -> float:
@@ -266,6 +283,7 @@ def summary(run: dict, scales: dict, order: list[str]) -> dict:
         )
     return {
         "putative": int(len(errors)),
+        "keypoints_in_densest_tenth": run["densest_tenth"],
         "putative_pairs": len(run["pairs"]),
         "share_under": {str(e): float(np.mean(errors < e)) for e in ERROR_EDGES},
         "share_wrong": float(np.mean(errors > WRONG_PX)),
@@ -323,11 +341,13 @@ def main() -> None:
     results = {label: summary(run, scales, order) for label, run in zip(labels, runs)}
 
     print(
-        "| method | putative | <0.5 px | <1 px | <2 px | <4 px (right) | >8 px (wrong) |\n|---|---|---|---|---|---|---|"
+        "| method | putative | <0.5 px | <1 px | <2 px | <4 px (right) | >8 px (wrong) | keypoints in the densest "
+        "tenth of cells |\n|---|---|---|---|---|---|---|---|"
     )
     for label, r in results.items():
         shares = " | ".join(f"{r['share_under'][str(e)]:.3f}" for e in ERROR_EDGES)
-        print(f"| {label} | {r['putative']} | {shares} | {r['share_wrong']:.3f} |")
+        bunching = r["keypoints_in_densest_tenth"]
+        print(f"| {label} | {r['putative']} | {shares} | {r['share_wrong']:.3f} | {bunching:.3f} |")
     print("\nright / wrong matches by the score quartile of the method's keypoints (lowest first):\n")
     print("| method | Q1 | Q2 | Q3 | Q4 |\n|---|---|---|---|---|")
     for label, r in results.items():

@@ -133,3 +133,11 @@ def test_coverage_counts_the_cells_that_hold_a_point_partial_cells_included():
     points = np.array([[1.0, 1.0], [39.9, 39.9], [40.0, 0.0], [99.0, 59.0]])  # cells (0,0) twice, (1,0), (2,1)
     assert me.coverage(points, (100, 60)) == pytest.approx(3 / (3 * 2))
     assert me.coverage(np.zeros((0, 2)), (100, 60)) == 0.0
+
+
+def test_keypoints_spread_evenly_put_a_tenth_in_the_densest_tenth_of_cells():
+    me = _script()
+    grid = np.stack(np.meshgrid(np.arange(20, 400, 40), np.arange(20, 400, 40)), -1).reshape(-1, 2).astype(float)
+    assert me.densest_tenth(grid, (400, 400)) == pytest.approx(0.1)  # one keypoint in each of 100 cells
+    bunched = np.r_[grid, np.full((100, 2), 5.0)]  # and 100 more in one cell: 101 + 9 of 200
+    assert me.densest_tenth(bunched, (400, 400)) == pytest.approx(110 / 200)
