@@ -35,7 +35,13 @@ from lburst.extras import require
 
 Method = Literal["phase", "ecc", "pyramid"]
 Motion = Literal["free", "linear"]
+Warp = Literal["rigid", "affine"]
 METHODS = ("phase", "ecc", "pyramid")
+#: what :func:`estimate_warps` fits to each frame: ``'rigid'``, a translation (with a constant
+#: velocity), and a rotation where the burst turns; ``'affine'``, that warp refined to a full
+#: affine map per frame (:func:`affine_warps`), which also takes out the zoom of a camera moving
+#: along its view and the shear of a tilted one
+WARPS = ("rigid", "affine")
 
 #: ``'pyramid'``: ECC runs at the smallest power-of-two downsampling with at most this many pixels
 PYRAMID_MAX_PIXELS = 1 << 19
@@ -281,21 +287,88 @@ def translation_warps(shifts: np.ndarray) -> np.ndarray:
     return warps
 
 
-def estimate_warps(burst: np.ndarray, motion: Motion = "linear", turn: bool = True) -> np.ndarray:
+def check_warp(warp: str) -> str:
+    if warp not in WARPS:
+        raise LBurstValueError(f"unknown warp {warp!r}: use {' or '.join(repr(w) for w in WARPS)}")
+    return warp
+
+
+def estimate_warps(burst: np.ndarray, motion: Motion = "linear", turn: bool = True, warp: Warp = "rigid") -> np.ndarray:
     """Warps ``(N, 2, 3)`` float64 of each frame onto the common frame (``frame_k(W_k p) ~ common(p)``):
     the translations of :func:`estimate_shifts` (``'pyramid'``, ``motion``); with ``turn``, where
     the burst turns, a rotation and a translation per frame instead
-    (:func:`lburst.burst.turning.euclidean_warps`, no motion model)."""
+    (:func:`lburst.burst.turning.euclidean_warps`, no motion model); with ``warp='affine'``,
+    either refined to an affine map per frame (:func:`affine_warps`)."""
     if motion not in ("free", "linear"):
         raise LBurstValueError(f"unknown motion model {motion!r}: use 'free' or 'linear'")
+    check_warp(warp)
     burst = check_burst(burst)
     levels = pyramid_levels(burst)
     shifts = pyramid_shifts(burst, levels=levels)
-    if turn:
-        warps = euclidean_warps(*levels, shifts)
-        if warps is not None:
-            return warps
-    return translation_warps(fit_linear(shifts) if motion == "linear" else shifts)
+    warps = euclidean_warps(*levels, shifts) if turn else None
+    if warps is None:
+        warps = translation_warps(fit_linear(shifts) if motion == "linear" else shifts)
+    return affine_warps(levels[0], warps) if warp == "affine" else warps
+
+
+def _to_level(warp: np.ndarray, factor: int) -> np.ndarray:
+    """A full-resolution 2x3 warp on a level downsampled by ``factor`` (full pixel =
+    ``factor`` x level pixel + ``(factor - 1) / 2``)."""
+    offset = (factor - 1) / 2.0
+    out = warp.copy()
+    out[:, 2] = (warp[:, 2] - offset * (1.0 - warp[:, :2].sum(1))) / factor
+    return out
+
+
+def _to_full(warp: np.ndarray, factor: int) -> np.ndarray:
+    """The inverse of :func:`_to_level`."""
+    offset = (factor - 1) / 2.0
+    out = warp.copy()
+    out[:, 2] = warp[:, 2] * factor + offset * (1.0 - warp[:, :2].sum(1))
+    return out
+
+
+def _correlation(reference: np.ndarray, image: np.ndarray, warp: np.ndarray, mask: np.ndarray) -> float:
+    """ECC's correlation of ``reference`` and ``image`` resampled by ``warp`` (2x3, inverse map)."""
+    h, w = reference.shape
+    moved = cv2.warpAffine(image, warp, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+    return float(cv2.computeECC(reference, moved, mask))
+
+
+def affine_warps(
+    fine: Level, warps: np.ndarray, smoothing: int = 7, iterations: int = 50, eps: float = 1e-4, margin: int = 8
+) -> np.ndarray:
+    """``warps`` ``(N, 2, 3)`` (full resolution) refined to an affine map per frame by OpenCV's
+    ECC on the ``fine`` level (:func:`pyramid_levels`), each started from its warp.  A frame keeps
+    its start where ECC fails or ends at a lower correlation than the start's (both measured on
+    the same smoothed images, inside the same margin): the refinement never makes a frame worse
+    by that measure.  No motion model: each frame has its own map."""
+    factor, frames = fine
+    n = len(warps)
+    middle = n // 2
+    h, w = frames[middle].shape
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, iterations, eps)
+    smooth = [cv2.GaussianBlur(frame, (smoothing, smoothing), 0) for frame in frames]
+    out = np.array(warps, np.float64)
+    for k in range(n):
+        if k == middle:
+            continue
+        start = _to_level(out[k], factor).astype(np.float32)
+        mask = inner_mask(h, w, max(margin // factor, 2) + int(np.ceil(np.abs(start[:, 2]).max())))
+        try:
+            _, refined = cv2.findTransformECC(
+                frames[middle], frames[k], start.copy(), cv2.MOTION_AFFINE, criteria, mask, smoothing
+            )
+        except cv2.error:
+            continue
+        if not np.all(np.isfinite(refined)):
+            continue
+        better = _correlation(smooth[middle], smooth[k], refined, mask) > _correlation(
+            smooth[middle], smooth[k], start, mask
+        )
+        if better:
+            out[k] = _to_full(refined.astype(np.float64), factor)
+    return out
 
 
 def align_burst(
@@ -304,22 +377,27 @@ def align_burst(
     method: Method = "pyramid",
     motion: Motion = "linear",
     turn: bool = True,
+    warp: Warp = "rigid",
 ) -> np.ndarray:
     """Every frame resampled onto the common frame (bilinear, replicated borders), in
     the burst's dtype: the burst as it would be without its motion.  ``shifts`` ``(N, 2)``
     or warps ``(N, 2, 3)`` (:func:`estimate_warps`) when given; else the estimated shifts
     (``method``, ``motion``), and with ``'pyramid'`` and ``turn`` the frames' rotation too
     where the burst turns (:mod:`lburst.burst.turning`; a burst that does not turn is
-    aligned by its shifts alone).  The common frame is returned untouched.
+    aligned by its shifts alone), and with ``'pyramid'`` and ``warp='affine'`` an affine map
+    per frame (:func:`affine_warps`).  The common frame is returned untouched.
 
     The warp runs in the burst's dtype (OpenCV, rounded): for uint16 it equals the
     float warp rounded; for uint8 OpenCV's fixed-point weights differ from it by 1 in
     about 0.4% of the values."""
     burst = check_burst(burst)
     n, h, w = burst.shape[:3]
+    check_warp(warp)
+    if warp != "rigid" and method != "pyramid":
+        raise LBurstValueError(f"warp {warp!r} needs the 'pyramid' method, not {method!r}")
     if shifts is None:
         if method == "pyramid":
-            warps = estimate_warps(burst, motion, turn)
+            warps = estimate_warps(burst, motion, turn, warp)
         else:
             warps = translation_warps(estimate_shifts(burst, method=method, motion=motion))
     else:

@@ -65,6 +65,7 @@ class LearnedOptions:
     whiten: bool = MultiScaleConfig.whiten
     pad: int | None = MultiScaleConfig.pad
     subpixel: bool = MultiScaleConfig.subpixel
+    warp: str = MultiScaleConfig.warp
     rotations: int = 1
     spread: int = 0
 
@@ -99,6 +100,7 @@ class LearnedOptions:
                 "whiten",
                 "pad",
                 "subpixel",
+                "warp",
             )
         }
 

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from lburst.burst.align import align_burst
+from lburst.burst.align import align_burst, check_warp
 from lburst.errors import LBurstValueError
 from lburst.features import Features, concatenate, image_size, select
 from lburst.model.fast import FastLBurstNet, descriptor_stride, descriptors_at
@@ -79,6 +79,10 @@ class MultiScaleConfig:
             the outer 16 px; with 32 px they cover it as the published model does, at about
             15 % more time and with mixed results in 3D (docs/results.md, "A reflected border
             at extraction").
+        warp: how weights that read aligned bursts (:attr:`LBurst.align`) get them:
+            ``'rigid'`` aligns each frame by a translation (and a rotation where the burst
+            turns), ``'affine'`` refines that to an affine map per frame, which also takes out
+            the zoom of a camera moving along its view (:func:`lburst.burst.align.affine_warps`).
         subpixel: move each keypoint to the vertex of a parabola through its repeatability
             peak and the two neighbours, along x and along y (:func:`subpixel_offsets`),
             instead of keeping the level's pixel centre, which is up to 2 px off at a
@@ -99,6 +103,7 @@ class MultiScaleConfig:
     whiten: bool = False
     pad: int | None = None
     subpixel: bool = False
+    warp: str = "rigid"
 
     def __post_init__(self) -> None:
         """``ValueError`` naming the field for any value outside its range (every use of
@@ -135,6 +140,7 @@ class MultiScaleConfig:
             if not isinstance(getattr(self, name), bool):
                 raise LBurstValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         autocast_dtype(self.precision)
+        check_warp(self.warp)
         levels = 1 + math.log(self.max_size / self.min_size) / math.log(self.scale_factor)
         if levels > MAX_LEVELS:
             raise LBurstValueError(
@@ -541,7 +547,7 @@ class LBurst:
             h, w = burst.shape[1:3]
             raise LBurstValueError(f"a {w}x{h} image is too small for features (at least {MIN_SIDE} px a side)")
         if self.align and n == self.frames and burst.dtype in (np.uint8, np.uint16):
-            burst = align_burst(burst)
+            burst = align_burst(burst, warp=cfg.warp if cfg is not None else "rigid")
         burst, scale = self._reduce(burst, cfg) if cfg is not None else (burst, 1.0)
         if scale == 1.0:
             burst = burst[self._perm]
