@@ -107,9 +107,12 @@ def rendered_depths(scene: Path, poses) -> dict | None:
 
 
 def transfer_px(truth: dict, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray) -> np.ndarray:
-    """Full image error (px) of matches ka <-> kb: ``kb`` against ``ka`` taken to 3D at the
-    renderer's depth and projected into ``b``.  NaN where the depth is not one surface (the
-    sky, or within 1 % of a depth edge in the 3x3 pixels around the keypoint)."""
+    """(N, 2): the full image error (px) of matches ka <-> kb, ``kb`` against ``ka`` taken to 3D
+    at the renderer's depth and projected into ``b``; and its signed component along the
+    epipolar line, the image of ``ka``'s ray, positive towards greater depth along that ray (a
+    positive error reads as a farther point, that is a shorter baseline).  NaN where the depth
+    is not one surface (the sky, or within 1 % of a depth edge in the 3x3 pixels around the
+    keypoint)."""
     depth, K = truth["depth"][a], truth["K"]
     h, w = depth.shape
     x = np.clip(np.round(ka[:, 0]).astype(int), 1, w - 2)
@@ -122,8 +125,13 @@ def transfer_px(truth: dict, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarr
     rot, t = relative_pose(poses, a, b)
     cam_b = (uv @ np.linalg.inv(K).T * np.where(valid, z, 1.0)[:, None]) @ rot.T + t
     proj = cam_b @ K.T
-    error = np.linalg.norm(kb - (proj[:, :2] / proj[:, 2:3] - 0.5), axis=1)
-    return np.where(valid & (cam_b[:, 2] > 0), error, np.nan)
+    true_b = proj[:, :2] / proj[:, 2:3] - 0.5
+    error = kb - true_b
+    epipole = K @ t  # camera a's centre, where the ray starts, seen from b (behind b: z < 0)
+    deeper = true_b - (epipole[:2] / epipole[2] - 0.5)
+    deeper *= np.sign(epipole[2]) / np.maximum(np.linalg.norm(deeper, axis=1, keepdims=True), 1e-9)
+    found = np.c_[np.linalg.norm(error, axis=1), np.sum(error * deeper, axis=1)]
+    return np.where((valid & (cam_b[:, 2] > 0))[:, None], found, np.nan)
 
 
 def relative_pose_error(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray, seed: int = 0) -> float:
@@ -242,12 +250,14 @@ def by_gap(run: dict, order: list[str]) -> dict:
 
 
 def full_error_summary(run: dict, order: list[str]) -> dict:
-    """On a rendered flight: matches judged by their full image error, by the pair's gap, and
-    the right ones of every pair (``"a b"``)."""
+    """On a rendered flight: matches judged by their full image error, by the pair's gap (with
+    the mean of the right ones' error along the epipolar line, towards greater depth), and the
+    right ones of every pair (``"a b"``)."""
     rank = {name: i for i, name in enumerate(order)}
     gaps: dict[int, dict] = {}
     pairs = {}
-    for (a, b), (_, kb, _, sampson, full) in run["pairs"].items():
+    for (a, b), (_, kb, _, sampson, transfer) in run["pairs"].items():
+        full, deeper = transfer[:, 0], transfer[:, 1]
         right = full < RIGHT_PX
         row = gaps.setdefault(
             abs(rank[a] - rank[b]), {"pairs": 0, "measured": 0, "right": 0, "under_1px": 0, "along_line": 0}
@@ -258,9 +268,11 @@ def full_error_summary(run: dict, order: list[str]) -> dict:
         row["right"] += int(right.sum())
         row["under_1px"] += int((full < 1.0).sum())
         row["along_line"] += int(((sampson < RIGHT_PX) & (full > WRONG_PX)).sum())
+        row["deeper_px"] = row.get("deeper_px", 0.0) + float(deeper[right].sum())
         pairs[f"{a} {b}"] = int(right.sum())
     for row in gaps.values():
         row["coverage"] /= row["pairs"]
+        row["deeper_px"] /= max(row["right"], 1)
     total = {k: sum(g[k] for g in gaps.values()) for k in ("measured", "right", "under_1px", "along_line")}
     return {**total, "by_gap": {str(g): gaps[g] for g in sorted(gaps)}, "by_pair": pairs}
 
@@ -367,7 +379,8 @@ def main() -> None:
         )
     if truth is not None:
         print(
-            "\nfull image error at the renderer's depth, by the pair's gap: right (under 1 px), coverage / along the line\n"
+            "\nfull image error at the renderer's depth, by the pair's gap: right (under 1 px), coverage / along the"
+            " line; mean error of the right ones along their line, towards greater depth (px)\n"
         )
         print("| method | " + " | ".join(gaps) + " |\n|---|" + "---|" * len(gaps))
         for label, r in results.items():

@@ -115,15 +115,29 @@ def test_on_a_rendered_flight_a_match_sliding_along_its_epipolar_line_is_caught(
 
     kb = seen_in_b(8.0)
     kb[:30] = seen_in_b(5.0)[:30]  # the same ray, 3 m nearer: on the epipolar line, 20-60 px away
-    full = me.transfer_px(truth, POSES, "a", "b", ka, kb)
+    transfer = me.transfer_px(truth, POSES, "a", "b", ka, kb)
+    full, deeper = transfer[:, 0], transfer[:, 1]
     sampson = me.sampson_px(cameras, POSES, "a", "b", ka + 0.5, kb + 0.5)
-    assert np.isnan(full[-5:]).all()
-    np.testing.assert_allclose(full[30:95], 0, atol=1e-6)
+    assert np.isnan(transfer[-5:]).all()
+    np.testing.assert_allclose(transfer[30:95], 0, atol=1e-6)
     assert (full[:30] > me.WRONG_PX).all() and (sampson[:30] < 1e-3).all()
-    run = {"pairs": {("a", "b"): (ka, kb, np.ones(100), sampson, full)}, "sizes": {"a": (640, 480), "b": (640, 480)}}
+    # the slid matches are nearer points of the same rays: off by their whole error, towards less depth
+    np.testing.assert_allclose(deeper[:30], -full[:30], rtol=1e-9)
+    # the same for a camera that moves forwards: a's centre lies behind b (the focus of expansion)
+    ahead = {"a": POSES["a"], "b": (np.eye(3), np.array([0.3, 0.0, -1.0]))}
+    cam = np.c_[ka[:30] + 0.5, np.ones(30)] @ np.linalg.inv(K).T * 5.0 + ahead["b"][1]
+    nearer = (cam @ K.T)[:, :2] / (cam @ K.T)[:, 2:] - 0.5
+    forward = me.transfer_px(truth, ahead, "a", "b", ka[:30], nearer)
+    assert (forward[:, 0] > 1).all()
+    np.testing.assert_allclose(forward[:, 1], -forward[:, 0], rtol=1e-9)
+    run = {
+        "pairs": {("a", "b"): (ka, kb, np.ones(100), sampson, transfer)},
+        "sizes": {"a": (640, 480), "b": (640, 480)},
+    }
     found = me.full_error_summary(run, ["a", "b"])
     assert found["measured"] == 95 and found["right"] == 65 and found["along_line"] == 30
     assert found["by_gap"]["1"]["along_line"] == 30 and found["by_pair"] == {"a b": 65}
+    assert found["by_gap"]["1"]["deeper_px"] == pytest.approx(0, abs=1e-6)  # the right ones are exact
     cells = {(int(x // 40), int(y // 40)) for x, y in kb[30:95]}  # the right ones, in b
     assert found["by_gap"]["1"]["coverage"] == pytest.approx(len(cells) / (16 * 12))
 
