@@ -386,7 +386,10 @@ def main() -> None:
         for label, r in results.items():
             cells = [r["full_error"]["by_gap"].get(g) for g in gaps]
             text = [
-                f"{c['right']} ({c['under_1px']}), {c['coverage']:.3f} / {c['along_line']}" if c else "" for c in cells
+                f"{c['right']} ({c['under_1px']}), {c['coverage']:.3f} / {c['along_line']}; {c['deeper_px']:+.3f}"
+                if c
+                else ""
+                for c in cells
             ]
             print(f"| {label} | " + " | ".join(text) + " |")
     if args.pose_seeds:
