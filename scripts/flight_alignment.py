@@ -1,0 +1,91 @@
+"""How well a rendered flight's bursts are aligned: each frame's estimated warp
+(:func:`lburst.burst.align.estimate_warps`) against the renderer's exact motion of every pixel
+of the common frame (its depth and the frames' poses), for each warp model.
+
+A translation cannot follow a camera that moves along its view: its frames zoom about the
+focus of expansion, and buildings add parallax that no single warp follows.  The median
+error is over the pixels that see a surface, per frame; the table gives each burst's worst
+frame, and the JSON every frame:
+
+    python scripts/flight_alignment.py outputs/scenes/flight_moonless --out outputs/flight_alignment.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from lburst.burst.align import WARPS, estimate_warps
+from lburst.burst.io import load_burst
+from lburst.scenes.night_flight import (
+    CONFIG_FILE,
+    NightFlightConfig,
+    burst_name,
+    burst_poses,
+    make_city,
+    reference,
+    render_view,
+)
+from lburst.scenes.raycast import intrinsics
+
+
+def true_positions(cfg: NightFlightConfig, city, burst: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """Where each pixel of the common frame lies in every frame of ``burst`` ((H*W, 2) each, pixel
+    centres at integers), and which pixels see a surface."""
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    R, t = reference(cfg).poses[burst_name(burst)]
+    _, depth = render_view(city, K, R, t, cfg.width, cfg.height)
+    u, v = np.meshgrid(np.arange(cfg.width) + 0.5, np.arange(cfg.height) + 0.5)
+    z = depth.reshape(-1)
+    seen = np.isfinite(z)
+    rays = np.c_[u.reshape(-1), v.reshape(-1), np.ones(u.size)] @ np.linalg.inv(K).T
+    world = (rays * np.where(seen, z, 1.0)[:, None] - t) @ R
+    positions = []
+    for Rk, tk in burst_poses(cfg, burst):
+        p = (world @ Rk.T + tk) @ K.T
+        positions.append(p[:, :2] / p[:, 2:3] - 0.5)
+    return positions, seen
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene", type=Path, help=f"a rendered flight (with {CONFIG_FILE})")
+    p.add_argument("--warps", nargs="+", default=list(WARPS), choices=WARPS)
+    p.add_argument("--out", type=Path, help="write every frame's median error as JSON")
+    args = p.parse_args()
+    if not (args.scene / CONFIG_FILE).is_file():
+        p.error(f"{args.scene / CONFIG_FILE}: no such file (a scene of lburst simulate flight)")
+    cfg = NightFlightConfig.from_dict(json.loads((args.scene / CONFIG_FILE).read_text()))
+    city = make_city(cfg)
+    grid = np.stack(np.meshgrid(np.arange(cfg.width), np.arange(cfg.height)), -1).reshape(-1, 2).astype(float)
+    results = {}
+    print("| burst | " + " | ".join(f"{w}: worst frame's median error (px)" for w in args.warps) + " |")
+    print("|---|" + "---|" * len(args.warps))
+    for i in range(cfg.n_bursts):
+        name = burst_name(i)
+        positions, seen = true_positions(cfg, city, i)
+        burst = load_burst(args.scene / name)
+        row = {}
+        for warp in args.warps:
+            warps = estimate_warps(burst, warp=warp)
+            row[warp] = [
+                float(np.median(np.linalg.norm(grid @ w[:, :2].T + w[:, 2] - q, axis=1)[seen]))
+                for w, q in zip(warps, positions)
+            ]
+        results[name] = row
+        print(f"| {name} | " + " | ".join(f"{max(row[w]):.2f}" for w in args.warps) + " |")
+    for warp in args.warps:
+        worst = [max(results[name][warp]) for name in results]
+        print(
+            f"{warp}: median over bursts of the worst frame {np.median(worst):.2f} px (range {min(worst):.2f}-{max(worst):.2f})"
+        )
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(results, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,40 @@
+"""scripts/flight_alignment.py: a burst's warps against the renderer's exact motion."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+from lburst.burst.align import estimate_warps
+from lburst.scenes import night_flight as nf
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "flight_alignment.py"
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("flight_alignment", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_common_frame_stays_put_and_an_affine_warp_follows_the_others_better():
+    me = _script()
+    cfg = nf.NightFlightConfig.daylight()  # the night flight, noise-free
+    city = nf.make_city(cfg)
+    positions, seen = me.true_positions(cfg, city, 1)
+    grid = np.stack(np.meshgrid(np.arange(cfg.width), np.arange(cfg.height)), -1).reshape(-1, 2).astype(float)
+    np.testing.assert_allclose(positions[2][seen], grid[seen], atol=1e-6)
+    burst = np.clip(nf.render_burst(cfg, 1, city, noisy=False), 0, 255).astype(np.uint8)
+
+    def worst(warp: str) -> float:
+        warps = estimate_warps(burst, warp=warp)
+        return max(
+            float(np.median(np.linalg.norm(grid @ w[:, :2].T + w[:, 2] - q, axis=1)[seen]))
+            for w, q in zip(warps, positions)
+        )
+
+    rigid, affine = worst("rigid"), worst("affine")
+    assert affine < 0.5 * rigid, (rigid, affine)
