@@ -5,9 +5,15 @@ of the common frame (its depth and the frames' poses), for each warp model.
 A translation cannot follow a camera that moves along its view: its frames zoom about the
 focus of expansion, and buildings add parallax that no single warp follows.  The median
 error is over the pixels that see a surface, per frame; the table gives each burst's worst
-frame, and the JSON every frame:
+frame, and the JSON every frame.
 
-    python scripts/flight_alignment.py outputs/scenes/flight_moonless --out outputs/flight_alignment.json
+With ``--features``, the keypoints that benchmark runs found on those bursts (their
+``features.h5``) are counted by how far the first warp model leaves their pixel from where
+it truly is, in the frame where that is furthest: a network that reads aligned bursts finds
+fewer keypoints where the alignment leaves motion it was not trained on.
+
+    python scripts/flight_alignment.py outputs/scenes/flight_moonless --out outputs/flight_alignment.json \
+        --features outputs/recon_flight_pad/lburst_*/flight_moonless outputs/recon_flight_pad/_order*/flight_moonless
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ import argparse
 import json
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from lburst.burst.align import WARPS, estimate_warps
@@ -50,18 +57,49 @@ def true_positions(cfg: NightFlightConfig, city, burst: int) -> tuple[list[np.nd
     return positions, seen
 
 
+#: edges (px) of the residual-motion bands of ``--features``
+RESIDUAL_BANDS = (0.0, 1.5, 2.5, 4.0, np.inf)
+
+
+def keypoint_density(features: Path, residuals: dict[str, np.ndarray]) -> dict:
+    """Keypoints per 1,000 pixels of each residual band (``residuals``: per image (H, W), NaN
+    where no surface is seen), over the images of a run's ``features.h5``."""
+    found, area = np.zeros(len(RESIDUAL_BANDS) - 1), np.zeros(len(RESIDUAL_BANDS) - 1)
+    with h5py.File(features, "r") as f:
+        for name in f:
+            residual = residuals[Path(name).stem]
+            h, w = residual.shape
+            k = f[name]["keypoints"][()]
+            at = residual[
+                np.clip(np.round(k[:, 1]).astype(int), 0, h - 1), np.clip(np.round(k[:, 0]).astype(int), 0, w - 1)
+            ]
+            found += np.histogram(at[np.isfinite(at)], RESIDUAL_BANDS)[0]
+            area += np.histogram(residual[np.isfinite(residual)], RESIDUAL_BANDS)[0]
+    return {
+        "bands_px": [float(b) for b in RESIDUAL_BANDS],
+        "area_share": (area / area.sum()).round(4).tolist(),
+        "keypoints_per_1000px": (1000 * found / np.maximum(area, 1)).round(3).tolist(),
+    }
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scene", type=Path, help=f"a rendered flight (with {CONFIG_FILE})")
     p.add_argument("--warps", nargs="+", default=list(WARPS), choices=WARPS)
     p.add_argument("--out", type=Path, help="write every frame's median error as JSON")
+    p.add_argument(
+        "--features", type=Path, nargs="+", default=[], help="OUT/<method>/<scene> runs of lburst bench reconstruction"
+    )
     args = p.parse_args()
     if not (args.scene / CONFIG_FILE).is_file():
         p.error(f"{args.scene / CONFIG_FILE}: no such file (a scene of lburst simulate flight)")
     cfg = NightFlightConfig.from_dict(json.loads((args.scene / CONFIG_FILE).read_text()))
     city = make_city(cfg)
     grid = np.stack(np.meshgrid(np.arange(cfg.width), np.arange(cfg.height)), -1).reshape(-1, 2).astype(float)
-    results = {}
+    for run in args.features:
+        if not (run / "features.h5").is_file():
+            p.error(f"{run / 'features.h5'}: no such file (a run of lburst bench reconstruction)")
+    results, residuals = {}, {}
     print("| burst | " + " | ".join(f"{w}: worst frame's median error (px)" for w in args.warps) + " |")
     print("|---|" + "---|" * len(args.warps))
     for i in range(cfg.n_bursts):
@@ -71,10 +109,12 @@ def main() -> None:
         row = {}
         for warp in args.warps:
             warps = estimate_warps(burst, warp=warp)
-            row[warp] = [
-                float(np.median(np.linalg.norm(grid @ w[:, :2].T + w[:, 2] - q, axis=1)[seen]))
-                for w, q in zip(warps, positions)
-            ]
+            errors = np.stack(
+                [np.linalg.norm(grid @ w[:, :2].T + w[:, 2] - q, axis=1) for w, q in zip(warps, positions)]
+            )
+            row[warp] = [float(np.median(e[seen])) for e in errors]
+            if warp == args.warps[0]:
+                residuals[name] = np.where(seen, errors.max(0), np.nan).reshape(cfg.height, cfg.width)
         results[name] = row
         print(f"| {name} | " + " | ".join(f"{max(row[w]):.2f}" for w in args.warps) + " |")
     for warp in args.warps:
@@ -82,9 +122,18 @@ def main() -> None:
         print(
             f"{warp}: median over bursts of the worst frame {np.median(worst):.2f} px (range {min(worst):.2f}-{max(worst):.2f})"
         )
+    density = {str(run): keypoint_density(run / "features.h5", residuals) for run in args.features}
+    if density:
+        bands = [f"{lo:g}-{hi:g} px" for lo, hi in zip(RESIDUAL_BANDS[:-1], RESIDUAL_BANDS[1:])]
+        print(f"\nkeypoints per 1,000 px by the motion that '{args.warps[0]}' alignment leaves at them:\n")
+        print("| run | " + " | ".join(bands) + " |\n|---|" + "---|" * len(bands))
+        share = next(iter(density.values()))["area_share"]
+        print("| (share of the image) | " + " | ".join(f"{a:.3f}" for a in share) + " |")
+        for run, d in density.items():
+            print(f"| {run} | " + " | ".join(f"{v:.2f}" for v in d["keypoints_per_1000px"]) + " |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(results, indent=1))
+        args.out.write_text(json.dumps({"bursts": results, "keypoint_density": density}, indent=1))
 
 
 if __name__ == "__main__":

@@ -93,6 +93,13 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         "(presets: 0.8 1.25; R2D2 rescales its second image to 256-1024 px, a far wider range)",
     )
     p.add_argument(
+        "--burst-flow",
+        type=real(0, 16),
+        metavar="PX",
+        help="largest std of the smooth non-uniform flow between a burst's frames, per frame, beyond the rest of "
+        "its motion (burst and aligned presets: 1): what alignment leaves where the scene has depth",
+    )
+    p.add_argument(
         "--max-tilt",
         type=real(0, 0.9),
         metavar="FRACTION",
@@ -197,7 +204,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
             cfg = replace(cfg, pair=replace(cfg.pair, **pair))
         except LBurstValueError as exc:
             raise LBurstValueError(
-                f"--scale-range/--max-tilt/--color-jitter/--noise-std/--sensor-prob/--sensors: {exc}"
+                f"--scale-range/--max-tilt/--burst-flow/--color-jitter/--noise-std/--sensor-prob/--sensors: {exc}"
             ) from exc
     if args.frames is not None:
         cfg = replace(cfg, pair=replace(cfg.pair, frames=args.frames))
@@ -216,6 +223,7 @@ def given_pair_options(args: argparse.Namespace) -> dict:
         "max_rotation_deg": getattr(args, "max_rotation", None),
         "scale_range": tuple(args.scale_range) if getattr(args, "scale_range", None) else None,
         "max_tilt": getattr(args, "max_tilt", None),
+        "burst_flow_px": getattr(args, "burst_flow", None),
         "color_jitter": tuple(args.color_jitter) if getattr(args, "color_jitter", None) else None,
         "noise_std": tuple(args.noise_std) if getattr(args, "noise_std", None) else None,
         "sensor_prob": getattr(args, "sensor_prob", None),
@@ -227,6 +235,7 @@ PAIR_FLAGS = {
     "max_rotation_deg": "--max-rotation",
     "scale_range": "--scale-range",
     "max_tilt": "--max-tilt",
+    "burst_flow_px": "--burst-flow",
     "color_jitter": "--color-jitter",
     "noise_std": "--noise-std",
     "sensor_prob": "--sensor-prob",

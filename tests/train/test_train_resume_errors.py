@@ -242,3 +242,18 @@ def test_color_jitter_changes_the_second_burst_as_set_and_is_kept_by_a_resumed_r
     (tmp_path / "config.json").write_text(json.dumps({"pair": {}}))
     with pytest.raises(ValueError, match=r"leave out --color-jitter 0.2 0.2 0.2 0.1 \(the run has 0 0 0 0\)"):
         _check_resumed_pairs(tmp_path, {"color_jitter": (0.2, 0.2, 0.2, 0.1)})
+
+
+def test_the_in_burst_flow_is_set_checked_and_kept_by_a_resumed_run(tmp_path):
+    from lburst.cli.train import _check_resumed_pairs
+
+    parser = argparse.ArgumentParser()
+    configure_parser(parser)
+    new = ["--out", str(tmp_path / "new"), "--preset", "aligned"]
+    assert config_from_args(parser.parse_args(new)).pair.burst_flow_px == 1.0
+    assert config_from_args(parser.parse_args([*new, "--burst-flow", "3"])).pair.burst_flow_px == 3.0
+    with pytest.raises(SystemExit):
+        parser.parse_args([*new, "--burst-flow", "-1"])
+    (tmp_path / "config.json").write_text(json.dumps({"pair": {"burst_flow_px": 1.0}}))
+    with pytest.raises(ValueError, match=r"leave out --burst-flow 3 \(the run has 1\)"):
+        _check_resumed_pairs(tmp_path, {"burst_flow_px": 3.0})
