@@ -10,10 +10,14 @@ frame, and the JSON every frame.
 With ``--features``, the keypoints that benchmark runs found on those bursts (their
 ``features.h5``) are counted by how far the first warp model leaves their pixel from where
 it truly is, in the frame where that is furthest: a network that reads aligned bursts finds
-fewer keypoints where the alignment leaves motion it was not trained on.
+fewer keypoints where the alignment leaves motion it was not trained on.  ``--still`` counts,
+for each method spec, the keypoints of motionless bursts instead: each common frame rendered
+without noise, under five independent draws of the scene's noise (seeded), so that nothing is
+left to align and what remains is the content of those pixels.
 
     python scripts/flight_alignment.py outputs/scenes/flight_moonless --out outputs/flight_alignment.json \
-        --features outputs/recon_flight_pad/lburst_*/flight_moonless outputs/recon_flight_pad/_order*/flight_moonless
+        --features outputs/recon_flight_pad/lburst_*/flight_moonless outputs/recon_flight_pad/_order*/flight_moonless \
+        --still lburst "lburst:$LBURST_SHARED/anchors/RoBLo_N16_B5.pt,frame_order=published"
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ import numpy as np
 
 from lburst.burst.align import WARPS, estimate_warps
 from lburst.burst.io import load_burst
+from lburst.methods import create
+from lburst.noise import noise_from_spec
 from lburst.scenes.night_flight import (
     CONFIG_FILE,
     NightFlightConfig,
@@ -61,25 +67,43 @@ def true_positions(cfg: NightFlightConfig, city, burst: int) -> tuple[list[np.nd
 RESIDUAL_BANDS = (0.0, 1.5, 2.5, 4.0, np.inf)
 
 
-def keypoint_density(features: Path, residuals: dict[str, np.ndarray]) -> dict:
+def keypoint_density(keypoints: dict[str, np.ndarray], residuals: dict[str, np.ndarray]) -> dict:
     """Keypoints per 1,000 pixels of each residual band (``residuals``: per image (H, W), NaN
-    where no surface is seen), over the images of a run's ``features.h5``."""
+    where no surface is seen), over the images of ``keypoints`` (image stem: (K, 2))."""
     found, area = np.zeros(len(RESIDUAL_BANDS) - 1), np.zeros(len(RESIDUAL_BANDS) - 1)
-    with h5py.File(features, "r") as f:
-        for name in f:
-            residual = residuals[Path(name).stem]
-            h, w = residual.shape
-            k = f[name]["keypoints"][()]
-            at = residual[
-                np.clip(np.round(k[:, 1]).astype(int), 0, h - 1), np.clip(np.round(k[:, 0]).astype(int), 0, w - 1)
-            ]
-            found += np.histogram(at[np.isfinite(at)], RESIDUAL_BANDS)[0]
-            area += np.histogram(residual[np.isfinite(residual)], RESIDUAL_BANDS)[0]
+    for name, k in keypoints.items():
+        residual = residuals[name]
+        h, w = residual.shape
+        at = residual[
+            np.clip(np.round(k[:, 1]).astype(int), 0, h - 1), np.clip(np.round(k[:, 0]).astype(int), 0, w - 1)
+        ]
+        found += np.histogram(at[np.isfinite(at)], RESIDUAL_BANDS)[0]
+        area += np.histogram(residual[np.isfinite(residual)], RESIDUAL_BANDS)[0]
     return {
         "bands_px": [float(b) for b in RESIDUAL_BANDS],
         "area_share": (area / area.sum()).round(4).tolist(),
         "keypoints_per_1000px": (1000 * found / np.maximum(area, 1)).round(3).tolist(),
     }
+
+
+def run_keypoints(run: Path) -> dict[str, np.ndarray]:
+    """The keypoints of every image of a benchmark run's ``features.h5``, by image stem."""
+    with h5py.File(run / "features.h5", "r") as f:
+        return {Path(name).stem: f[name]["keypoints"][()] for name in f}
+
+
+def still_burst(cfg: NightFlightConfig, city, burst: int, frames: int = 5) -> np.ndarray:
+    """A motionless burst of ``burst``'s common frame: the noise-free render under ``frames``
+    independent draws of the scene's noise (seeded by the burst and the frame)."""
+    K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
+    R, t = reference(cfg).poses[burst_name(burst)]
+    image, _ = render_view(city, K, R, t, cfg.width, cfg.height, cfg.supersample)
+    image = image * cfg.exposure
+    noise = noise_from_spec(cfg.noise) if cfg.noise not in ("", "none") else None
+    draws = [
+        image if noise is None else noise(image, np.random.default_rng([cfg.seed, 7, burst, k])) for k in range(frames)
+    ]
+    return np.stack([np.clip(np.round(d), 0, 255).astype(np.uint8) for d in draws])
 
 
 def main() -> None:
@@ -90,6 +114,8 @@ def main() -> None:
     p.add_argument(
         "--features", type=Path, nargs="+", default=[], help="OUT/<method>/<scene> runs of lburst bench reconstruction"
     )
+    p.add_argument("--still", nargs="+", default=[], metavar="SPEC", help="method specs to run on motionless bursts")
+    p.add_argument("--top-k", type=int, default=8000, help="keypoints per image of --still (default 8000)")
     args = p.parse_args()
     if not (args.scene / CONFIG_FILE).is_file():
         p.error(f"{args.scene / CONFIG_FILE}: no such file (a scene of lburst simulate flight)")
@@ -99,6 +125,8 @@ def main() -> None:
     for run in args.features:
         if not (run / "features.h5").is_file():
             p.error(f"{run / 'features.h5'}: no such file (a run of lburst bench reconstruction)")
+    extractors = {spec: create(spec, top_k=args.top_k) for spec in args.still}
+    still: dict[str, dict[str, np.ndarray]] = {spec: {} for spec in args.still}
     results, residuals = {}, {}
     print("| burst | " + " | ".join(f"{w}: worst frame's median error (px)" for w in args.warps) + " |")
     print("|---|" + "---|" * len(args.warps))
@@ -116,13 +144,16 @@ def main() -> None:
             if warp == args.warps[0]:
                 residuals[name] = np.where(seen, errors.max(0), np.nan).reshape(cfg.height, cfg.width)
         results[name] = row
+        for spec, extract in extractors.items():
+            still[spec][name] = extract(still_burst(cfg, city, i))["keypoints"]
         print(f"| {name} | " + " | ".join(f"{max(row[w]):.2f}" for w in args.warps) + " |")
     for warp in args.warps:
         worst = [max(results[name][warp]) for name in results]
         print(
             f"{warp}: median over bursts of the worst frame {np.median(worst):.2f} px (range {min(worst):.2f}-{max(worst):.2f})"
         )
-    density = {str(run): keypoint_density(run / "features.h5", residuals) for run in args.features}
+    density = {str(run): keypoint_density(run_keypoints(run), residuals) for run in args.features}
+    density.update({f"{spec} (still)": keypoint_density(found, residuals) for spec, found in still.items()})
     if density:
         bands = [f"{lo:g}-{hi:g} px" for lo, hi in zip(RESIDUAL_BANDS[:-1], RESIDUAL_BANDS[1:])]
         print(f"\nkeypoints per 1,000 px by the motion that '{args.warps[0]}' alignment leaves at them:\n")

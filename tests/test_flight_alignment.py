@@ -38,3 +38,14 @@ def test_the_common_frame_stays_put_and_an_affine_warp_follows_the_others_better
 
     rigid, affine = worst("rigid"), worst("affine")
     assert affine < 0.5 * rigid, (rigid, affine)
+
+
+def test_keypoints_are_counted_per_1000_pixels_of_each_residual_band():
+    me = _script()
+    residual = np.full((10, 100), 0.5)  # 1,000 px: 600 under 1.5 px, 200 at 2, 100 at 3, 100 at 9
+    residual[6:8], residual[8], residual[9] = 2.0, 3.0, 9.0
+    residual[0, 0] = np.nan  # no surface: counted nowhere
+    keypoints = np.array([[1.0, 0.0], [2.0, 1.0], [5.0, 6.0], [5.0, 9.0], [6.0, 9.0], [0.0, 0.0]])
+    found = me.keypoint_density({"a": keypoints}, {"a": residual})
+    np.testing.assert_allclose(found["area_share"], [599 / 999, 200 / 999, 100 / 999, 100 / 999], atol=1e-4)
+    np.testing.assert_allclose(found["keypoints_per_1000px"], [2000 / 599, 1000 / 200, 0, 2000 / 100], atol=1e-3)
