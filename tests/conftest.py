@@ -28,3 +28,19 @@ def anchors(shared: Path) -> Path:
     if not (path / "reference_outputs.npz").is_file():
         pytest.skip(f"published checkpoints not found in {path}")
     return path
+
+
+@pytest.fixture(scope="session")
+def load_script():
+    """A function that imports ``scripts/NAME.py`` of the repository as a module."""
+    import importlib.util
+
+    folder = Path(__file__).resolve().parents[1] / "scripts"
+
+    def load(name: str):
+        spec = importlib.util.spec_from_file_location(name, folder / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load

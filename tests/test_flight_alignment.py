@@ -2,26 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 
 from lburst.burst.align import estimate_warps
 from lburst.scenes import night_flight as nf
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "flight_alignment.py"
 
-
-def _script():
-    spec = importlib.util.spec_from_file_location("flight_alignment", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_the_common_frame_stays_put_and_an_affine_warp_follows_the_others_better():
-    me = _script()
+def test_the_common_frame_stays_put_and_an_affine_warp_follows_the_others_better(load_script):
+    me = load_script("flight_alignment")
     cfg = nf.NightFlightConfig.daylight()  # the night flight, noise-free
     city = nf.make_city(cfg)
     positions, seen = me.true_positions(cfg, city, 1)
@@ -40,8 +28,8 @@ def test_the_common_frame_stays_put_and_an_affine_warp_follows_the_others_better
     assert affine < 0.5 * rigid, (rigid, affine)
 
 
-def test_keypoints_are_counted_per_1000_pixels_of_each_residual_band():
-    me = _script()
+def test_keypoints_are_counted_per_1000_pixels_of_each_residual_band(load_script):
+    me = load_script("flight_alignment")
     residual = np.full((10, 100), 0.5)  # 1,000 px: 600 under 1.5 px, 200 at 2, 100 at 3, 100 at 9
     residual[6:8], residual[8], residual[9] = 2.0, 3.0, 9.0
     residual[0, 0] = np.nan  # no surface: counted nowhere

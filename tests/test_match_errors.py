@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import h5py
 import numpy as np
 import pytest
@@ -13,14 +10,6 @@ from lburst.sfm.reference import Reference
 from lburst.sfm.scene import save_reference
 
 pytest.importorskip("pycolmap")
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "match_errors.py"
-
-
-def _script():
-    spec = importlib.util.spec_from_file_location("match_errors", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _rotation(deg: float) -> np.ndarray:
@@ -43,8 +32,8 @@ def _seen(rng: np.random.Generator, count: int) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize("layout", ["per_image", "shared"])  # a photo set's cameras; a synthetic flight's one
-def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path, layout):
-    me = _script()
+def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path, layout, load_script):
+    me = load_script("match_errors")
     rng = np.random.default_rng(0)
     camera, poses = CAMERA, POSES
     scene = tmp_path / "scene"
@@ -77,10 +66,10 @@ def test_true_matches_have_no_error_and_swapped_ones_are_wrong(tmp_path, layout)
     assert summary["pose_auc"]["5"] > 0.9
 
 
-def test_a_wrong_relative_pose_is_measured_in_degrees_and_the_auc_follows_its_curve():
+def test_a_wrong_relative_pose_is_measured_in_degrees_and_the_auc_follows_its_curve(load_script):
     import pycolmap
 
-    me = _script()
+    me = load_script("match_errors")
     cameras = {n: pycolmap.Camera(**CAMERA) for n in "ab"}
     kps = _seen(np.random.default_rng(1), 300)
     told = {"a": POSES["a"], "b": (_rotation(13), POSES["b"][1])}  # a reference 3 degrees off the truth
@@ -93,10 +82,10 @@ def test_a_wrong_relative_pose_is_measured_in_degrees_and_the_auc_follows_its_cu
     assert auc["20"] == pytest.approx((2 * 0.375 + 2 * 0.625 + 16 * 0.75) / 20)
 
 
-def test_on_a_rendered_flight_a_match_sliding_along_its_epipolar_line_is_caught():
+def test_on_a_rendered_flight_a_match_sliding_along_its_epipolar_line_is_caught(load_script):
     """At the renderer's depth, true matches have no full error; a match to the point of the
     same ray at another depth lies on its epipolar line (no Sampson error) but is far off."""
-    me = _script()
+    me = load_script("match_errors")
     import pycolmap
 
     cameras = {n: pycolmap.Camera(**CAMERA) for n in "ab"}
@@ -142,15 +131,15 @@ def test_on_a_rendered_flight_a_match_sliding_along_its_epipolar_line_is_caught(
     assert found["by_gap"]["1"]["coverage"] == pytest.approx(len(cells) / (16 * 12))
 
 
-def test_coverage_counts_the_cells_that_hold_a_point_partial_cells_included():
-    me = _script()
+def test_coverage_counts_the_cells_that_hold_a_point_partial_cells_included(load_script):
+    me = load_script("match_errors")
     points = np.array([[1.0, 1.0], [39.9, 39.9], [40.0, 0.0], [99.0, 59.0]])  # cells (0,0) twice, (1,0), (2,1)
     assert me.coverage(points, (100, 60)) == pytest.approx(3 / (3 * 2))
     assert me.coverage(np.zeros((0, 2)), (100, 60)) == 0.0
 
 
-def test_keypoints_spread_evenly_put_a_tenth_in_the_densest_tenth_of_cells():
-    me = _script()
+def test_keypoints_spread_evenly_put_a_tenth_in_the_densest_tenth_of_cells(load_script):
+    me = load_script("match_errors")
     grid = np.stack(np.meshgrid(np.arange(20, 400, 40), np.arange(20, 400, 40)), -1).reshape(-1, 2).astype(float)
     assert me.densest_tenth(grid, (400, 400)) == pytest.approx(0.1)  # one keypoint in each of 100 cells
     bunched = np.r_[grid, np.full((100, 2), 5.0)]  # and 100 more in one cell: 101 + 9 of 200

@@ -2,30 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from lburst.tum import write_tum
-
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "trajectory_drift.py"
-
-
-def _script():
-    spec = importlib.util.spec_from_file_location("trajectory_drift", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _poses(centres: np.ndarray) -> list:
     return [(np.eye(3), -c) for c in centres]  # world-to-camera of cameras at the centres
 
 
-def test_a_stretched_first_half_shows_along_the_path_only(tmp_path):
-    me = _script()
+def test_a_stretched_first_half_shows_along_the_path_only(tmp_path, load_script):
+    me = load_script("trajectory_drift")
     ref = np.c_[np.arange(11.0) * 5, np.zeros(11), np.full(11, 50.0)]  # 50 m along x, 50 m up
     est = ref.copy()
     est[:6, 0] = 25 - (25 - ref[:6, 0]) * 1.02  # the first half 2 % too long, ending where it should
