@@ -288,6 +288,7 @@ def translation_warps(shifts: np.ndarray) -> np.ndarray:
 
 
 def check_warp(warp: str) -> str:
+    """``warp`` if it is one of :data:`WARPS`; else ``LBurstValueError`` in one line."""
     if warp not in WARPS:
         raise LBurstValueError(f"unknown warp {warp!r}: use {' or '.join(repr(w) for w in WARPS)}")
     return warp
