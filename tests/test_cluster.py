@@ -122,12 +122,10 @@ def test_a_local_cluster_extracts_bursts_and_a_recording_as_one_process_does(fli
     out = tmp_path / "out"
     assert lburst_main(["extract", *bursts(flight), "--out", str(out), "--cluster", "local:2"]) == 0
     assert lburst_main(["extract", *video(flight), "--out", str(out), "--cluster", cluster.scheduler.address]) == 0
+    # Byte for byte: the workers run one torch thread, as the reference does.  At another
+    # thread count lburst-b5's scores differ in their last bits on some CPUs (an AMD EPYC with
+    # AVX512-BF16) and not on others (an Intel Xeon with AMX), so that is not asserted here.
     assert_same_features(out, one_process)
-    # at another thread count lburst-b5's scores differ in their last bits: the condition is needed
-    other = tmp_path / "two_threads"
-    assert lburst_main(["extract", bursts(flight)[1], "--out", str(other), "--threads", "2"]) == 0
-    name = f"{Path(bursts(flight)[1]).name}.npz"
-    assert stored_arrays(other)[name] != stored_arrays(one_process)[name]
 
 
 class KillOnce(distributed.WorkerPlugin):
