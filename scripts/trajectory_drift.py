@@ -4,8 +4,8 @@ keyframe after the benchmark's similarity alignment, split into along the path, 
 
 An error that every seed repeats comes from the features (one part of the path stretched,
 a bend); COLMAP's run-to-run spread averages out.  Up is the world's z (a rendered flight's).
-The runs are OUT/<method>/<scene>[-seedS]
-folders of ``lburst bench reconstruction`` (their ``trajectory.tum`` and ``reference.tum``):
+The runs are OUT/<method>/<scene>[-seedS] folders of ``lburst bench reconstruction`` (their
+``trajectory.tum`` and ``reference.tum``):
 
     python scripts/trajectory_drift.py "outputs/recon_flight_pad/lburst_top_k=8000_*/flight_moonless*" \
         "outputs/recon_flight_pad/_order=published_*/flight_moonless*" --labels lburst-b5 published
