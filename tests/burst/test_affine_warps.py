@@ -9,31 +9,24 @@ import pytest
 from skimage import data
 
 from lburst.burst.align import _to_full, _to_level, align_burst, estimate_warps
+from lburst.burst.motion import BurstMotion
 from lburst.errors import LBurstValueError
 from lburst.model.extractor import MultiScaleConfig
+from lburst.noise import noise_from_spec
+from lburst.simulate import simulate_burst
 
 cv2.setNumThreads(1)
-#: per frame: 1.5 % zoom about a point off the centre (the focus of expansion), and a drift
-ZOOM, VELOCITY = 0.015, np.array([3.0, -2.0])
+#: per frame: 1.5 % zoom about the centre and a drift, together a zoom about a point off the
+#: centre (the focus of expansion)
+MOTION = BurstMotion(shift=(3.0, -2.0), zoom=0.015)
 
 
 def zooming_burst(size: tuple[int, int], noise: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """A 5-frame burst of the astronaut zooming by ZOOM per frame about (0.3 w, 0.6 h) and moving
-    by VELOCITY, with Gaussian noise; and its true warps (``frame_k(W_k p) = common(p)``)."""
-    w, h = size
-    scene = cv2.resize(data.astronaut(), (w + 200, h + 200), interpolation=cv2.INTER_CUBIC).astype(np.float32)
-    focus = np.array([0.3 * w, 0.6 * h])
-    rng = np.random.default_rng(seed)
-    frames, warps = [], []
-    for t in range(-2, 3):
-        s = 1 + ZOOM * t
-        warp = np.c_[s * np.eye(2), focus - s * focus + VELOCITY * t]
-        inverse = cv2.invertAffineTransform(warp)
-        inverse[:, 2] += 100
-        frame = cv2.warpAffine(scene, inverse, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)
-        frames.append(np.clip(frame + rng.normal(0, noise, frame.shape), 0, 255).astype(np.uint8))
-        warps.append(warp)
-    return np.stack(frames), np.stack(warps)
+    """A 5-frame burst of the astronaut moving by MOTION (:func:`lburst.simulate.simulate_burst`),
+    with Gaussian noise; and its true warps (``frame_k(W_k p) = common(p)``)."""
+    image = cv2.resize(data.astronaut(), size, interpolation=cv2.INTER_CUBIC)
+    burst = simulate_burst(image, 5, MOTION, noise_from_spec(f"gaussian:{noise:g}") if noise else None, seed)
+    return burst, np.stack([MOTION.affine(k, size)[:2] for k in range(-2, 3)])
 
 
 def _corner_error(warps: np.ndarray, truth: np.ndarray, size: tuple[int, int]) -> float:
