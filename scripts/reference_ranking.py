@@ -22,7 +22,7 @@ import numpy as np
 
 from lburst.scenes.photo_scene import REFERENCE_DIR
 from lburst.scenes.reference_spread import rerun_folders
-from lburst.sfm.poses import camera_to_world, trajectory_errors, umeyama
+from lburst.sfm.poses import centre_errors, trajectory_errors
 from lburst.sfm.reference import Reference
 from lburst.sfm.result import RESULT_FILE, ReconstructionResult
 from lburst.sfm.scene import REFERENCE_FILE
@@ -39,10 +39,8 @@ def ate(poses: dict, reference: dict) -> float | None:
 def photo_offsets(poses: dict, reference: dict) -> dict[str, float]:
     """Per photo, its centre's distance from the reference's after the similarity alignment."""
     common = [n for n in reference if n in poses]
-    est = np.array([camera_to_world(poses[n])[:3, 3] for n in common])
-    ref = np.array([camera_to_world(reference[n])[:3, 3] for n in common])
-    aligned = umeyama(est, ref).apply(est)
-    return {n: float(d) for n, d in zip(common, np.linalg.norm(aligned - ref, axis=1))}
+    errors = centre_errors([poses[n] for n in common], [reference[n] for n in common])
+    return {n: float(d) for n, d in zip(common, np.linalg.norm(errors, axis=1))}
 
 
 def main() -> None:

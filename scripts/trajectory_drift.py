@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.sfm.poses import camera_to_world, umeyama
-from lburst.tum import read_tum
+from lburst.sfm.poses import camera_to_world, centre_errors
+from lburst.tum import lookup, read_tum
 
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -31,12 +31,10 @@ def keyframe_errors(run: Path) -> tuple[np.ndarray, np.ndarray]:
     est_t, est = read_tum(run / "trajectory.tum")
     ref_t, ref = read_tum(run / "reference.tum")
     common = np.intersect1d(np.round(est_t, 6), np.round(ref_t, 6))
-
-    def centres(times: np.ndarray, poses: list) -> np.ndarray:
-        return np.array([camera_to_world(poses[int(np.argmin(np.abs(times - t)))])[:3, 3] for t in common])
-
-    e, r = centres(est_t, est), centres(ref_t, ref)
-    error = umeyama(e, r).apply(e) - r
+    estimated = [lookup(est_t, est, t) for t in common]
+    reference = [lookup(ref_t, ref, t) for t in common]
+    error = centre_errors(estimated, reference)
+    r = np.array([camera_to_world(p)[:3, 3] for p in reference])
     along = np.gradient(r, axis=0)
     along /= np.linalg.norm(along, axis=1, keepdims=True)
     across = np.cross(UP, along)

@@ -87,6 +87,15 @@ def align_poses(poses: list[Pose], sim: Sim3) -> list[np.ndarray]:
     return out
 
 
+def centre_errors(estimated: list[Pose], reference: list[Pose], with_scale: bool = True) -> np.ndarray:
+    """(N, 3): each estimated camera centre, moved onto the reference by the similarity (or,
+    without ``with_scale``, the rigid motion) that :func:`trajectory_errors` aligns with, minus
+    the reference centre.  Its norms are the ATE's per-camera errors."""
+    est = np.array([camera_to_world(p)[:3, 3] for p in estimated])
+    ref = np.array([camera_to_world(p)[:3, 3] for p in reference])
+    return umeyama(est, ref, with_scale).apply(est) - ref
+
+
 def _stats(errors: np.ndarray) -> dict[str, float]:
     return {
         "rmse": float(np.sqrt(np.mean(errors**2))),

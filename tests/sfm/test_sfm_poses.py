@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs, sequential_pairs
-from lburst.sfm.poses import Sim3, trajectory_errors, umeyama
+from lburst.sfm.poses import Sim3, centre_errors, trajectory_errors, umeyama
 
 SQUARE = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
 
@@ -65,6 +65,16 @@ def test_known_centre_perturbation():
     sim = trajectory_errors(estimated, reference)
     assert sim["scale"] == pytest.approx(s)
     assert sim["ate_rmse"] == pytest.approx(np.sqrt((1 - s) ** 2 / 2 + s**2 * d**2))
+
+
+def test_centre_errors_are_the_bumps_and_give_the_ate():
+    d = 0.1
+    reference = [pose_from(np.eye(3), c) for c in SQUARE]
+    bumps = np.array([[0, 0, d], [0, 0, -d], [0, 0, d], [0, 0, -d]])
+    estimated = [pose_from(np.eye(3), c + b) for c, b in zip(SQUARE, bumps)]
+    np.testing.assert_allclose(centre_errors(estimated, reference, with_scale=False), bumps, atol=1e-12)
+    errors = np.linalg.norm(centre_errors(estimated, reference), axis=1)
+    assert np.sqrt(np.mean(errors**2)) == pytest.approx(trajectory_errors(estimated, reference)["ate_rmse"])
 
 
 def test_known_rotation_perturbation():
