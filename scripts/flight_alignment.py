@@ -42,7 +42,7 @@ from lburst.scenes.night_flight import (
     reference,
     render_view,
 )
-from lburst.scenes.raycast import intrinsics
+from lburst.scenes.raycast import intrinsics, transfer
 
 
 def true_positions(cfg: NightFlightConfig, city, burst: int) -> tuple[list[np.ndarray], np.ndarray]:
@@ -54,12 +54,8 @@ def true_positions(cfg: NightFlightConfig, city, burst: int) -> tuple[list[np.nd
     u, v = np.meshgrid(np.arange(cfg.width) + 0.5, np.arange(cfg.height) + 0.5)
     z = depth.reshape(-1)
     seen = np.isfinite(z)
-    rays = np.c_[u.reshape(-1), v.reshape(-1), np.ones(u.size)] @ np.linalg.inv(K).T
-    world = (rays * np.where(seen, z, 1.0)[:, None] - t) @ R
-    positions = []
-    for Rk, tk in burst_poses(cfg, burst):
-        p = (world @ Rk.T + tk) @ K.T
-        positions.append(p[:, :2] / p[:, 2:3] - 0.5)
+    uv = np.c_[u.reshape(-1), v.reshape(-1)]
+    positions = [transfer(K, uv, np.where(seen, z, 1.0), (R, t), pose)[0] - 0.5 for pose in burst_poses(cfg, burst)]
     return positions, seen
 
 

@@ -46,7 +46,7 @@ import pycolmap
 
 from lburst.errors import LBurstValueError
 from lburst.scenes.night_flight import CONFIG_FILE, NightFlightConfig, make_city, render_view
-from lburst.scenes.raycast import intrinsics
+from lburst.scenes.raycast import intrinsics, transfer
 from lburst.sfm.reference import Reference
 from lburst.sfm.scene import reference_cameras
 
@@ -121,17 +121,15 @@ def transfer_px(truth: dict, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarr
     around = np.stack([depth[y + dy, x + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)])
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(z) & (np.abs(around - z).max(0) < 0.01 * z)
-    uv = np.c_[ka.astype(np.float64) + 0.5, np.ones(len(ka))]  # keypoint centres at integers, the renderer's at +0.5
-    rot, t = relative_pose(poses, a, b)
-    cam_b = (uv @ np.linalg.inv(K).T * np.where(valid, z, 1.0)[:, None]) @ rot.T + t
-    proj = cam_b @ K.T
-    true_b = proj[:, :2] / proj[:, 2:3] - 0.5
+    # keypoint centres at integers, the renderer's at +0.5
+    seen, z_b = transfer(K, ka + 0.5, np.where(valid, z, 1.0), poses[a], poses[b])
+    true_b = seen - 0.5
     error = kb - true_b
-    epipole = K @ t  # camera a's centre, where the ray starts, seen from b (behind b: z < 0)
+    epipole = K @ relative_pose(poses, a, b)[1]  # camera a's centre, where the ray starts, seen from b (z < 0: behind)
     deeper = true_b - (epipole[:2] / epipole[2] - 0.5)
     deeper *= np.sign(epipole[2]) / np.maximum(np.linalg.norm(deeper, axis=1, keepdims=True), 1e-9)
     found = np.c_[np.linalg.norm(error, axis=1), np.sum(error * deeper, axis=1)]
-    return np.where((valid & (cam_b[:, 2] > 0))[:, None], found, np.nan)
+    return np.where((valid & (z_b > 0))[:, None], found, np.nan)
 
 
 def relative_pose_error(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.ndarray, seed: int = 0) -> float:
@@ -256,8 +254,8 @@ def full_error_summary(run: dict, order: list[str]) -> dict:
     rank = {name: i for i, name in enumerate(order)}
     gaps: dict[int, dict] = {}
     pairs = {}
-    for (a, b), (_, kb, _, sampson, transfer) in run["pairs"].items():
-        full, deeper = transfer[:, 0], transfer[:, 1]
+    for (a, b), (_, kb, _, sampson, truth) in run["pairs"].items():
+        full, deeper = truth[:, 0], truth[:, 1]
         right = full < RIGHT_PX
         row = gaps.setdefault(
             abs(rank[a] - rank[b]), {"pairs": 0, "measured": 0, "right": 0, "under_1px": 0, "along_line": 0}

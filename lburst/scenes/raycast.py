@@ -22,6 +22,19 @@ def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
     return np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
 
 
+def transfer(
+    K: np.ndarray, uv: np.ndarray, depth: np.ndarray, pose_from: tuple, pose_to: tuple
+) -> tuple[np.ndarray, np.ndarray]:
+    """Image points ``uv`` (N, 2) of a camera at ``pose_from`` whose surface lies at z-depth
+    ``depth`` (N,), seen by a camera at ``pose_to`` (both ``(R, t)`` world-to-camera, intrinsics
+    ``K``): their image points there (N, 2) and their z-depth there (N,; negative behind it)."""
+    (r0, t0), (r1, t1) = pose_from, pose_to
+    cam = np.c_[np.asarray(uv, np.float64), np.ones(len(uv))] @ np.linalg.inv(K).T * np.asarray(depth)[:, None]
+    seen = ((cam - t0) @ r0) @ np.asarray(r1).T + t1
+    p = seen @ K.T
+    return p[:, :2] / p[:, 2:3], seen[:, 2]
+
+
 def rays_through(K: np.ndarray, R: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Unit world-space directions (..., 3) of the rays through image points ``uv`` (..., 2)."""
     uv = np.asarray(uv, dtype=np.float64)
