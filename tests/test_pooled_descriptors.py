@@ -17,7 +17,7 @@ def test_keypoints_stay_and_descriptors_come_from_a_quarter_resolution_map(load_
     level = torch.rand(1, 3, 64, 96)
     with torch.no_grad():
         _, _, half = model._fast_level(level, "fp32")
-        rep, rel, quarter = script._pooled_level(model, level, "fp32")
+        _, _, quarter = script._pooled_level(model, level, "fp32")
     assert half.shape[-2:] == (32, 48) and quarter.shape[-2:] == (16, 24)
     assert torch.allclose(quarter[..., 3, 5], half[..., 6:8, 10:12].mean((-2, -1)), atol=1e-6)
 
