@@ -1,0 +1,43 @@
+"""``lburst`` with lburst-b5's keypoints chosen by the light network: every pyramid level's
+repeatability and reliability come from the shipped lburst-b5-lite on the same input, the
+descriptors from lburst-b5's own map.  Both networks read the aligned 5-frame burst, so the level
+is the same tensor for both.  Everything else (the pipeline, the command line) is the ``lburst``
+command's, e.g. how far the light network's detector shrinks lburst-b5's loss under noise:
+
+    python scripts/light_detector.py bench homography data/validation --every 4 --sigma 0 100 \
+        --methods lburst --out outputs/val_light_detector
+
+The swap applies on the fast path of every network but the light one, in this process only.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from lburst.cli import main
+from lburst.model.extractor import LBurst
+from lburst.model.lite import LiteNet
+
+_network_level = LBurst._fast_level
+_detector: list[LBurst] = []
+
+
+def light_detector() -> LBurst:
+    """The shipped light network in torch (fp32), loaded once."""
+    if not _detector:
+        _detector.append(LBurst.pretrained("lburst-b5-lite", device="cpu", runtime="torch"))
+    return _detector[0]
+
+
+def _light_detector_level(self: LBurst, x, precision: str):
+    """The light network's repeatability and reliability, this network's descriptor map."""
+    if isinstance(self.net, LiteNet):
+        return _network_level(self, x, precision)
+    repeatability, reliability, _ = _network_level(light_detector(), x, "fp32")
+    _, _, descriptors = _network_level(self, x, precision)
+    return repeatability, reliability, descriptors
+
+
+if __name__ == "__main__":
+    LBurst._fast_level = _light_detector_level
+    sys.exit(main(sys.argv[1:]))
