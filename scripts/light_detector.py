@@ -7,6 +7,9 @@ command's, e.g. how far the light network's detector shrinks lburst-b5's loss un
     python scripts/light_detector.py bench homography data/validation --every 4 --sigma 0 100 \
         --methods lburst --out outputs/val_light_detector
 
+With ``--repeatability-only`` first, only the repeatability is the light network's; the
+reliability stays lburst-b5's, the gate trained on lburst-b5's own descriptors.
+
 The swap applies on the fast path of every network but the light one, in this process only.
 """
 
@@ -38,6 +41,17 @@ def _light_detector_level(self: LBurst, x, precision: str):
     return repeatability, reliability, descriptors
 
 
+def _light_repeatability_level(self: LBurst, x, precision: str):
+    """The light network's repeatability, this network's reliability and descriptor map."""
+    if isinstance(self.net, LiteNet):
+        return _network_level(self, x, precision)
+    repeatability, _, _ = _network_level(light_detector(), x, "fp32")
+    _, reliability, descriptors = _network_level(self, x, precision)
+    return repeatability, reliability, descriptors
+
+
 if __name__ == "__main__":
-    LBurst._fast_level = _light_detector_level
-    sys.exit(main(sys.argv[1:]))
+    args = sys.argv[1:]
+    only = bool(args) and args[0] == "--repeatability-only"
+    LBurst._fast_level = _light_repeatability_level if only else _light_detector_level
+    sys.exit(main(args[1:] if only else args))

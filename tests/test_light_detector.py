@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 from lburst.model.extractor import LBurst
 
@@ -24,3 +25,16 @@ def test_keypoints_are_the_light_networks_and_descriptors_lburst_b5s(load_script
     i, j = np.nonzero(near)
     assert len(i) > 0
     np.testing.assert_allclose(mixed["descriptors"][j], own["descriptors"][i], atol=1e-4)
+
+
+def test_with_the_repeatability_only_the_reliability_stays_lburst_b5s(load_script):
+    script = load_script("light_detector")
+    b5 = LBurst.pretrained("lburst-b5", device="cpu", runtime="torch")
+    level = torch.rand(1, 15, 64, 96)
+    with torch.no_grad():
+        light_rep, light_rel, _ = script.light_detector()._fast_level(level, "fp32")
+        own_rep, own_rel, own_desc = b5._fast_level(level, "fp32")
+        rep, rel, desc = script._light_repeatability_level(b5, level, "fp32")
+    assert torch.equal(rep, light_rep) and not torch.allclose(rep, own_rep, atol=1e-3)
+    assert torch.equal(rel, own_rel) and not torch.allclose(rel, light_rel, atol=1e-3)
+    assert torch.equal(desc, own_desc)
