@@ -11,15 +11,17 @@ descriptor map of the other, so each pair of sequences is matched four ways:
     noisy     clean          noise in the keypoints (and their scores) only
     noisy     noisy          the benchmark at σ (equal to `lburst bench homography --sigma σ`)
 
-MMA, repeatability at 3 px and keypoints / matches per image as `lburst bench homography` reports them (mutual nearest
-neighbours, pairs (1, k), mean over a sequence's pairs, then over sequences):
+MMA, repeatability at 3 px and keypoints / matches per image as `lburst bench homography`
+reports them (mutual nearest neighbours, pairs (1, k), mean over a sequence's pairs, then over
+sequences):
 
     python scripts/drop_sources.py data/validation --every 4 --sigma 100 \
         --methods lburst "lburst:$LBURST_SHARED/anchors/RoBLo_N16_B5.pt,frame_order=published" \
         --out outputs/drop_sources_val100.json
 
 Only networks on the fast path in torch (lburst-b5, the published checkpoints, and the light
-network as ``lburst-lite,runtime=torch``: its default ONNX runtime takes one burst at a time).
+network as ``lburst-lite,runtime=torch``: its default ONNX runtime takes one burst at a time),
+at one rotation, without ``spread``.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from tqdm import tqdm
 from lburst.bench.homography import noise_levels, pair_metrics, protocol_burst
 from lburst.bench.sequences import list_sequences, read_sequence
 from lburst.burst.io import atomic_path
+from lburst.errors import LBurstError, LBurstValueError
 from lburst.methods import create
 from lburst.model.extractor import LBurst
 from lburst.simulate import simulate_burst
@@ -55,7 +58,9 @@ def _swapped_level(self: LBurst, x: torch.Tensor, precision: str):
 
 def run(data: Path, every: int, sigma: float, spec: str, top_k: int) -> dict:
     extractor = create(spec, top_k=top_k)
-    model: LBurst = extractor.model
+    model = getattr(extractor, "model", None)
+    if not isinstance(model, LBurst) or extractor.rotations != 1 or extractor.spread:
+        raise LBurstValueError(f"{spec!r} is not a burst network at one rotation without spread")
     level = noise_levels([sigma], [])[0]
     rows: dict[tuple[str, str], list[dict]] = {combo: [] for combo in COMBOS}
     folders = list_sequences(data)[::every]
@@ -94,19 +99,29 @@ def run(data: Path, every: int, sigma: float, spec: str, top_k: int) -> dict:
     return out
 
 
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("data", type=Path, help="sequences in Oxford or HPatches layout")
-    parser.add_argument("--every", type=int, default=1, help="keep every n-th sequence (as the benchmark)")
+    parser.add_argument("--every", type=_positive, default=1, help="keep every n-th sequence (as the benchmark)")
     parser.add_argument("--sigma", type=float, default=100.0, help="Gaussian noise std on 0..255")
     parser.add_argument("--methods", nargs="+", default=["lburst"], help="method specs (burst networks)")
-    parser.add_argument("--top-k", type=int, default=5000)
+    parser.add_argument("--top-k", type=_positive, default=5000)
     parser.add_argument("--out", type=Path, required=True, help="JSON file to write")
     args = parser.parse_args()
     LBurst._fast_level = _swapped_level
     results = {"data": str(args.data), "every": args.every, "sigma": args.sigma, "top_k": args.top_k, "methods": {}}
     for spec in args.methods:
-        results["methods"][spec] = run(args.data, args.every, args.sigma, spec, args.top_k)
+        try:
+            results["methods"][spec] = run(args.data, args.every, args.sigma, spec, args.top_k)
+        except LBurstError as exc:
+            parser.exit(2, f"drop_sources.py: {exc}\n")
         print(f"\n{spec} (σ {args.sigma:g}): MMA@3 / MMA@1, repeatability@3, keypoints / matches per image")
         for name, r in results["methods"][spec].items():
             print(

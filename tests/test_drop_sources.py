@@ -4,6 +4,7 @@ other's descriptor map."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from lburst.model.extractor import LBurst
 
@@ -25,3 +26,17 @@ def test_keypoints_come_from_the_detector_burst_and_descriptors_from_the_other(l
             np.testing.assert_allclose(found["descriptors"], plain[detector]["descriptors"], atol=1e-5)
         else:  # the same points, described by the other burst's map
             assert not np.allclose(found["descriptors"], plain[detector]["descriptors"], atol=1e-2)
+
+
+def test_a_method_that_is_not_a_burst_network_stops_in_one_line(load_script, monkeypatch, tmp_path, capsys):
+    script = load_script("drop_sources")
+    monkeypatch.setattr(LBurst, "_fast_level", LBurst._fast_level)  # main() swaps it; undo after the test
+    argv = ["drop_sources.py", str(tmp_path), "--methods", "lburst,rotations=2", "--out", str(tmp_path / "a.json")]
+    monkeypatch.setattr("sys.argv", argv)
+    with pytest.raises(SystemExit) as exit_:
+        script.main()
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "drop_sources.py: 'lburst,rotations=2' is not a burst network at one rotation without spread"
+    ]
+    assert not (tmp_path / "a.json").exists()
