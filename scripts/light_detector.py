@@ -32,22 +32,24 @@ def light_detector() -> LBurst:
     return _detector[0]
 
 
-def _light_detector_level(self: LBurst, x, precision: str):
-    """The light network's repeatability and reliability, this network's descriptor map."""
+def _light_level(self: LBurst, x, precision: str, light_reliability: bool):
+    """The light network's repeatability (and reliability, with ``light_reliability``), this
+    network's descriptor map (and reliability, without)."""
     if isinstance(self.net, LiteNet):
         return _network_level(self, x, precision)
-    repeatability, reliability, _ = _network_level(light_detector(), x, "fp32")
-    _, _, descriptors = _network_level(self, x, precision)
-    return repeatability, reliability, descriptors
+    repeatability, light, _ = _network_level(light_detector(), x, "fp32")
+    _, own, descriptors = _network_level(self, x, precision)
+    return repeatability, light if light_reliability else own, descriptors
+
+
+def _light_detector_level(self: LBurst, x, precision: str):
+    """The light network's repeatability and reliability, this network's descriptor map."""
+    return _light_level(self, x, precision, light_reliability=True)
 
 
 def _light_repeatability_level(self: LBurst, x, precision: str):
     """The light network's repeatability, this network's reliability and descriptor map."""
-    if isinstance(self.net, LiteNet):
-        return _network_level(self, x, precision)
-    repeatability, _, _ = _network_level(light_detector(), x, "fp32")
-    _, reliability, descriptors = _network_level(self, x, precision)
-    return repeatability, reliability, descriptors
+    return _light_level(self, x, precision, light_reliability=False)
 
 
 if __name__ == "__main__":
