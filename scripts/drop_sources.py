@@ -13,7 +13,8 @@ descriptor map of the other, so each pair of sequences is matched four ways:
 
 MMA, repeatability at 3 px and keypoints / matches per image as `lburst bench homography`
 reports them (mutual nearest neighbours, pairs (1, k), mean over a sequence's pairs, then over
-sequences):
+sequences; in the JSON as the benchmark's ``summary``, each sequence's ``seconds`` the four-way
+extraction of one image):
 
     python scripts/drop_sources.py data/validation --every 4 --sigma 100 \
         --methods lburst "lburst:$LBURST_SHARED/anchors/RoBLo_N16_B5.pt,frame_order=published" \
@@ -28,13 +29,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
 
-import numpy as np
 import torch
 from tqdm import tqdm
 
-from lburst.bench.homography import noise_levels, pair_metrics, protocol_burst
+from lburst.bench.homography import noise_levels, pair_metrics, protocol_burst, summarize
 from lburst.bench.sequences import list_sequences, read_sequence
 from lburst.burst.io import atomic_path
 from lburst.errors import LBurstError, LBurstValueError
@@ -62,12 +63,15 @@ def run(data: Path, every: int, sigma: float, spec: str, top_k: int) -> dict:
     if not isinstance(model, LBurst) or extractor.rotations != 1 or extractor.spread:
         raise LBurstValueError(f"{spec!r} is not a burst network at one rotation without spread")
     level = noise_levels([sigma], [])[0]
-    rows: dict[tuple[str, str], list[dict]] = {combo: [] for combo in COMBOS}
+    per_pair: dict[tuple[str, str], dict[str, list[dict]]] = {combo: {} for combo in COMBOS}
+    seconds: dict[str, float] = {}
+    kinds: dict[str, str] = {}
     folders = list_sequences(data)[::every]
     bar = tqdm(total=6 * len(folders), desc=spec)
     for folder in folders:
         seq = read_sequence(folder)
         feats: dict[tuple[str, str], list] = {combo: [] for combo in COMBOS}
+        start = time.perf_counter()
         for i, image in enumerate(seq.images):
             noisy, motion = protocol_burst(image, folder.name, i, level)
             clean = simulate_burst(image, len(noisy), motion)
@@ -75,28 +79,15 @@ def run(data: Path, every: int, sigma: float, spec: str, top_k: int) -> dict:
             for combo, f in zip(COMBOS, found):
                 feats[combo].append(f)
             bar.update(1)
+        seconds[folder.name] = (time.perf_counter() - start) / len(seq.images)
+        kinds[folder.name] = seq.kind
         for combo in COMBOS:
-            pairs = [pair_metrics(seq, feats[combo], k) for k in range(len(seq.images) - 1)]
-            rows[combo].append(
-                {
-                    "sequence": folder.name,
-                    "mma": np.mean([p["mma"] for p in pairs], axis=0).tolist(),
-                    "keypoints": float(np.mean([p["keypoints"] for p in pairs])),
-                    "matches": float(np.mean([p["matches"] for p in pairs])),
-                    "rep3": float(np.mean([p["rep3"] for p in pairs])),
-                }
-            )
+            per_pair[combo][folder.name] = [pair_metrics(seq, feats[combo], k) for k in range(len(seq.images) - 1)]
     bar.close()
-    out = {}
-    for (det, desc), seqs in rows.items():
-        out[f"{det} detector, {desc} descriptors"] = {
-            "mma": np.mean([s["mma"] for s in seqs], axis=0).tolist(),
-            "keypoints": float(np.mean([s["keypoints"] for s in seqs])),
-            "matches": float(np.mean([s["matches"] for s in seqs])),
-            "rep3": float(np.mean([s["rep3"] for s in seqs])),
-            "sequences": seqs,
-        }
-    return out
+    return {
+        f"{det} detector, {desc} descriptors": summarize(pairs, seconds, kinds)
+        for (det, desc), pairs in per_pair.items()
+    }
 
 
 def _positive(text: str) -> int:
@@ -123,7 +114,8 @@ def main() -> None:
         except LBurstError as exc:
             parser.exit(2, f"drop_sources.py: {exc}\n")
         print(f"\n{spec} (σ {args.sigma:g}): MMA@3 / MMA@1, repeatability@3, keypoints / matches per image")
-        for name, r in results["methods"][spec].items():
+        for name, summary in results["methods"][spec].items():
+            r = summary["all"]
             print(
                 f"  {name:36s} {r['mma'][2]:.3f} / {r['mma'][0]:.3f}   {r['rep3']:.3f}   {r['keypoints']:.0f} / {r['matches']:.0f}"
             )

@@ -15,6 +15,7 @@ The swap applies on the fast path of every network but the light one, in this pr
 
 from __future__ import annotations
 
+import functools
 import sys
 
 from lburst.cli import main
@@ -22,14 +23,12 @@ from lburst.model.extractor import LBurst
 from lburst.model.lite import LiteNet
 
 _network_level = LBurst._fast_level
-_detector: list[LBurst] = []
 
 
+@functools.cache
 def light_detector() -> LBurst:
     """The shipped light network in torch (fp32), loaded once."""
-    if not _detector:
-        _detector.append(LBurst.pretrained("lburst-b5-lite", device="cpu", runtime="torch"))
-    return _detector[0]
+    return LBurst.pretrained("lburst-b5-lite", device="cpu", runtime="torch")
 
 
 def _light_level(self: LBurst, x, precision: str, light_reliability: bool):
