@@ -62,6 +62,9 @@ class LiteConfig:
         fine: channels at half resolution.
         coarse: channels at quarter resolution.
         dilations: one residual depthwise-separable block per entry, with that dilation.
+        desc_stride: image pixels per pixel of the raw descriptor map: 4 (quarter resolution,
+            the shipped light network) or 2 (half resolution: the quarter map upsampled x2
+            plus a 1x1 projection of the fine map, as lburst-b5's half map).
     """
 
     frames: int = 5
@@ -69,6 +72,7 @@ class LiteConfig:
     fine: int = 32
     coarse: int = 96
     dilations: tuple[int, ...] = (1, 2, 4, 8)
+    desc_stride: int = 4
 
     def __post_init__(self) -> None:
         if self.frames < 1 or self.frames % 2 == 0:
@@ -78,6 +82,8 @@ class LiteConfig:
                 raise LBurstValueError(f"{name} must be positive, got {getattr(self, name)}")
         if not self.dilations or any(d < 1 for d in self.dilations):
             raise LBurstValueError(f"dilations must be positive, got {self.dilations}")
+        if self.desc_stride not in (2, 4):
+            raise LBurstValueError(f"desc_stride must be 2 or 4, got {self.desc_stride}")
 
     @property
     def in_channels(self) -> int:
@@ -86,7 +92,8 @@ class LiteConfig:
     def net_string(self) -> str:
         """The checkpoint's ``net`` string: ``LBurstLite(inchan=15,dim=128,...)``."""
         dil = "-".join(str(d) for d in self.dilations)
-        return f"{LITE_NAME}(inchan={self.in_channels},dim={self.dim},fine={self.fine},coarse={self.coarse},dilations={dil})"
+        stride = "" if self.desc_stride == 4 else f",desc_stride={self.desc_stride}"
+        return f"{LITE_NAME}(inchan={self.in_channels},dim={self.dim},fine={self.fine},coarse={self.coarse},dilations={dil}{stride})"
 
     @classmethod
     def from_net_string(cls, net: str) -> "LiteConfig":
@@ -139,6 +146,16 @@ def _up2(x: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
     return up[..., : size[0], : size[1]]
 
 
+def _descriptors(
+    desc: nn.Module, desc_fine: nn.Module | None, coarse: torch.Tensor, fine: torch.Tensor
+) -> torch.Tensor:
+    """The raw descriptor map: ``desc(coarse)`` at quarter resolution, or with ``desc_fine``
+    that map upsampled x2 plus ``desc_fine(fine)`` at half resolution."""
+    if desc_fine is None:
+        return desc(coarse)
+    return _up2(desc(coarse), fine.shape[-2:]) + desc_fine(fine)
+
+
 class LiteNet(nn.Module):
     """The light burst network; see the module docstring."""
 
@@ -151,6 +168,7 @@ class LiteNet(nn.Module):
         self.down = _conv_bn_relu(c.fine, c.coarse, stride=2)
         self.blocks = nn.Sequential(*(SeparableBlock(c.coarse, d) for d in c.dilations))
         self.desc = nn.Conv2d(c.coarse, c.dim, 1)
+        self.desc_fine = nn.Conv2d(c.fine, c.dim, 1, bias=False) if c.desc_stride == 2 else None
         self.head_coarse = nn.Conv2d(c.coarse, 6, 1)
         self.head_fine = nn.Conv2d(c.fine, 6, 3, padding=1, bias=False)
 
@@ -162,14 +180,14 @@ class LiteNet(nn.Module):
             )
 
     def desc_and_heads(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Raw quarter-resolution descriptors ``(B, dim, ceil(H/4), ceil(W/4))`` (rounding up
-        at each stride) and the six head logits at half resolution (four repeatability
-        sub-pixels, two reliability classes)."""
+        """Raw descriptors, ``(B, dim, ceil(H/4), ceil(W/4))`` (rounding up at each stride;
+        ``(B, dim, ceil(H/2), ceil(W/2))`` with ``desc_stride`` 2) and the six head logits at
+        half resolution (four repeatability sub-pixels, two reliability classes)."""
         self._check(x)
         fine = self.fine(self.stem(x))
         coarse = self.blocks(self.down(fine))
         heads = self.head_fine(fine) + _up2(self.head_coarse(coarse), fine.shape[-2:])
-        return self.desc(coarse), heads
+        return _descriptors(self.desc, self.desc_fine, coarse, fine), heads
 
     @staticmethod
     def maps(heads: torch.Tensor, size: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -188,7 +206,8 @@ class LiteNet(nn.Module):
         size = x.shape[-2:]
         desc, heads = self.desc_and_heads(x)
         repeatability, reliability, logit = self.maps(heads, size)
-        up = F.interpolate(desc, scale_factor=4.0, mode="bilinear", align_corners=False)[..., : size[0], : size[1]]
+        up = F.interpolate(desc, scale_factor=float(self.config.desc_stride), mode="bilinear", align_corners=False)
+        up = up[..., : size[0], : size[1]]
         out = {
             "descriptors": F.normalize(up, p=2, dim=1),
             "repeatability": repeatability,
@@ -230,7 +249,8 @@ class LiteInference(nn.Module):
         self.blocks = nn.ModuleList()
         for block in net.blocks:
             self.blocks.append(nn.ModuleList([block.depthwise, _fold(block.pointwise, block.bn)]))
-        self.desc, self.head_coarse, self.head_fine = net.desc, net.head_coarse, net.head_fine
+        self.desc, self.desc_fine = net.desc, net.desc_fine
+        self.head_coarse, self.head_fine = net.head_coarse, net.head_fine
         self.eval().to(memory_format=torch.channels_last)
 
     def _desc_and_heads(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -240,7 +260,7 @@ class LiteInference(nn.Module):
         for depthwise, pointwise in self.blocks:
             y = y + F.relu(pointwise(depthwise(y)))
         heads = self.head_fine(fine) + _up2(self.head_coarse(y), fine.shape[-2:])
-        return self.desc(y), heads
+        return _descriptors(self.desc, self.desc_fine, y, fine), heads
 
     def core(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         if self._autocast is None:

@@ -6,7 +6,8 @@ noisy bursts A and B as the student.  The student learns, at every pixel:
 
 - its raw quarter-resolution descriptors, against the teacher's descriptors at the same
   points (the mean of each 2x2 block of the teacher's half map, which is where bilinear
-  upsampling puts a quarter-map node): ``1 - cos``;
+  upsampling puts a quarter-map node): ``1 - cos``; a student with a half-resolution map
+  (``desc_stride`` 2) learns the teacher's half map itself;
 - its repeatability and reliability, against the teacher's, at full resolution: ``|s - t|``;
 
 beside R2D2's self-supervised repeatability losses on the pair (cosine similarity through
@@ -35,12 +36,13 @@ def teacher_form(teacher: torch.nn.Module, precision: str = "fp32") -> FastLBurs
 
 
 @torch.no_grad()
-def teacher_targets(teacher: FastLBurstNet, x: torch.Tensor) -> dict[str, torch.Tensor]:
-    """``repeatability``, ``reliability`` (B, 1, H, W) and ``descriptors`` at the quarter-map
-    nodes (B, D, ceil(H/4), ceil(W/4)), unit length, from the teacher on ``x``."""
+def teacher_targets(teacher: FastLBurstNet, x: torch.Tensor, stride: int = 4) -> dict[str, torch.Tensor]:
+    """``repeatability``, ``reliability`` (B, 1, H, W) and ``descriptors`` at the nodes of a
+    student's raw map, unit length, from the teacher on ``x``: the quarter-map nodes
+    (B, D, ceil(H/4), ceil(W/4)) for ``stride`` 4, the teacher's half map for 2."""
     rep, rel, half = teacher(x)
-    quarter = F.avg_pool2d(half.float(), 2, ceil_mode=True)
-    return {"repeatability": rep.float(), "reliability": rel.float(), "descriptors": F.normalize(quarter, dim=1)}
+    nodes = F.avg_pool2d(half.float(), 2, ceil_mode=True) if stride == 4 else half.float()
+    return {"repeatability": rep.float(), "reliability": rel.float(), "descriptors": F.normalize(nodes, dim=1)}
 
 
 def lite_distillation_step(
@@ -60,7 +62,8 @@ def lite_distillation_step(
     dtype = autocast_dtype(precision)
     n = batch["flow"].shape[0]
     size = normalised.shape[-2:]
-    target = teacher_targets(teacher, normalised)
+    stride = getattr(net, "module", net).config.desc_stride
+    target = teacher_targets(teacher, normalised, stride)
     with torch.autocast(device_type=normalised.device.type, dtype=dtype, enabled=dtype is not None):
         desc, heads = net(normalised, raw=True)  # through the module (a DDP wrapper syncs its gradients)
     rep, rel, _ = LiteNet.maps(heads.float(), size)
@@ -76,7 +79,7 @@ def lite_distillation_step(
     loss = distill_weight * distill + cosim + peaky
     extra = {}
     if ap_weight > 0:
-        full = F.interpolate(desc, scale_factor=4.0, mode="bilinear", align_corners=False)
+        full = F.interpolate(desc, scale_factor=float(stride), mode="bilinear", align_corners=False)
         full = F.normalize(full[..., : size[0], : size[1]], dim=1)
         _, ap = reliability_ap_loss(full[:n], full[n:], rel[:n].detach(), batch["flow"], batch["mask"], generator)
         loss = loss + ap_weight * (1 - ap)

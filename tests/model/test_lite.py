@@ -20,6 +20,7 @@ from lburst.train.loop import TrainConfig, _normalise, train
 from lburst.train.pairs import PairConfig
 
 SMALL = LiteConfig(frames=3, dim=16, fine=8, coarse=16, dilations=(1, 2))
+HALF = LiteConfig(frames=3, dim=16, fine=8, coarse=16, dilations=(1, 2), desc_stride=2)
 TINY = PairConfig(frames=3, crop=64, long_side=(160, 256), max_burst_motion=6, max_pair_shift=6)
 
 
@@ -34,8 +35,12 @@ def _trained_bn_net(config=SMALL, seed=0) -> LiteNet:
 
 
 def test_net_string_round_trips_and_rejects_other_strings():
-    for config in (LiteConfig(), SMALL):
+    for config in (LiteConfig(), SMALL, HALF):
         assert LiteConfig.from_net_string(config.net_string()) == config
+    # the shipped network's string (and so its checkpoint) does not change with desc_stride's default
+    assert LiteConfig().net_string() == "LBurstLite(inchan=15,dim=128,fine=32,coarse=96,dilations=1-2-4-8)"
+    with pytest.raises(ValueError, match="desc_stride"):
+        LiteConfig(desc_stride=3)
     for bad in ("LBurstLite(inchan=14)", "LBurstLite(inchan=15,width=3)", "LBurstLite(inchan=15,dim=x)", "Other()"):
         with pytest.raises(ValueError):
             LiteConfig.from_net_string(bad)
@@ -43,18 +48,22 @@ def test_net_string_round_trips_and_rejects_other_strings():
         LiteConfig(frames=4)
 
 
+@pytest.mark.parametrize("config", [SMALL, HALF], ids=["quarter", "half"])
 @pytest.mark.parametrize("size", [(64, 96), (61, 75)])
-def test_inference_form_equals_the_training_form_in_eval_mode(size):
-    net = _trained_bn_net()
-    x = torch.randn(1, SMALL.in_channels, *size)
+def test_inference_form_equals_the_training_form_in_eval_mode(size, config):
+    net = _trained_bn_net(config)
+    x = torch.randn(1, config.in_channels, *size)
     with torch.no_grad():
         out = net(x)
         rep, rel, desc = net.inference().core(x)
+    stride = config.desc_stride
     assert rep.shape == rel.shape == (1, 1, *size)
-    assert desc.shape == (1, SMALL.dim, math.ceil(size[0] / 4), math.ceil(size[1] / 4))
+    assert desc.shape == (1, config.dim, math.ceil(size[0] / stride), math.ceil(size[1] / stride))
+    assert descriptor_stride(desc.shape[-1], size[1]) == stride
     torch.testing.assert_close(rep, out["repeatability"], atol=1e-5, rtol=1e-4)
     torch.testing.assert_close(rel, out["reliability"], atol=1e-5, rtol=1e-4)
-    dense = F.interpolate(desc, scale_factor=4.0, mode="bilinear", align_corners=False)[..., : size[0], : size[1]]
+    dense = F.interpolate(desc, scale_factor=float(stride), mode="bilinear", align_corners=False)
+    dense = dense[..., : size[0], : size[1]]
     torch.testing.assert_close(F.normalize(dense, dim=1), out["descriptors"], atol=1e-5, rtol=1e-4)
 
 
@@ -75,12 +84,14 @@ def test_keypoint_descriptors_are_the_upsampled_quarter_map_at_the_keypoints():
     torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-4)
 
 
-def test_checkpoint_round_trip_and_extraction(tmp_path):
-    net = _trained_bn_net(LiteConfig(frames=3))
+@pytest.mark.parametrize("stride", [4, 2])
+def test_checkpoint_round_trip_and_extraction(tmp_path, stride):
+    config = LiteConfig(frames=3, desc_stride=stride)
+    net = _trained_bn_net(config)
     path = tmp_path / "lite.pt"
     save_checkpoint(net, path, meta={"input": "aligned"})
     loaded, extra = load_checkpoint(path)
-    assert isinstance(loaded, LiteNet) and loaded.config == LiteConfig(frames=3)
+    assert isinstance(loaded, LiteNet) and loaded.config == config
     assert extra["net"].startswith("LBurstLite(inchan=9")
     for k, v in net.state_dict().items():
         torch.testing.assert_close(loaded.state_dict()[k], v, atol=0, rtol=0)
@@ -92,6 +103,9 @@ def test_checkpoint_round_trip_and_extraction(tmp_path):
     np.testing.assert_allclose(np.linalg.norm(feats["descriptors"], axis=1), 1, atol=1e-5)
     dense = model.dense(burst)
     assert dense["descriptors"].shape == (90, 120, 128) and dense["repeatability"].shape == (90, 120)
+    # the sparse descriptors are the dense map's at the keypoints, whatever the map's stride
+    x, y = feats["keypoints"].round().astype(int).T
+    np.testing.assert_allclose(feats["descriptors"], dense["descriptors"][y, x], atol=1e-4)
 
 
 def test_a_checkpoint_with_a_broken_light_net_string_is_a_clear_error(tmp_path):
@@ -109,7 +123,7 @@ def photos(tmp_path_factory):
     return folder
 
 
-def _student_and_teacher(photos):
+def _student_and_teacher(photos, stride=4):
     """Two pairs of 3-frame bursts, their normalised input, a random teacher, a small student and its optimiser."""
     ds = PairDataset(list_photos([photos]), TINY, seed=0)
     items = [ds[i] for i in range(2)]
@@ -118,12 +132,13 @@ def _student_and_teacher(photos):
     torch.manual_seed(1)
     teacher = teacher_form(LBurstNet(NetConfig(frames=3)).eval())
     torch.manual_seed(0)
-    net = LiteNet(LiteConfig(frames=3, fine=16, coarse=32)).train()
+    net = LiteNet(LiteConfig(frames=3, fine=16, coarse=32, desc_stride=stride)).train()
     return batch, x, teacher, net, torch.optim.Adam(net.parameters(), lr=3e-3)
 
 
-def test_distillation_pulls_the_student_towards_the_teacher(photos):
-    batch, x, teacher, net, opt = _student_and_teacher(photos)
+@pytest.mark.parametrize("stride", [4, 2])
+def test_distillation_pulls_the_student_towards_the_teacher(photos, stride):
+    batch, x, teacher, net, opt = _student_and_teacher(photos, stride)
     parts = []
     for _ in range(25):
         losses = lite_distillation_step(net, teacher, batch, x, patch=8)
