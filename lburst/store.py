@@ -9,9 +9,10 @@ method has the same key wherever it was computed (``lburst extract`` of a record
 
 - ``method`` (:func:`method_key`): the method spec and the SHA-1 of the weights it loads
   (:func:`lburst.methods.learned.results_key`), so retrained weights are not served
-  old features, plus the options given besides the spec (``top_k``, ``precision``), an
-  option left out when it has the method's default value (``--top-k 4000`` is the
-  default of a learned method, so ``extract`` and ``reconstruct`` key it alike), and the
+  old features, plus the options given besides the spec (``precision``, ``runtime``), an
+  option left out when it has the method's default value (``lburst extract`` and
+  ``lburst reconstruct`` both write a learned method's ``top_k`` into the spec, so they key
+  it alike), and the
   revision of the extraction code (:data:`REVISION`), so a change of it is not served old
   features either;
 - ``source``: the burst's absolute ``path`` and ``sha1``, the SHA-1 of its content

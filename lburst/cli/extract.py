@@ -42,14 +42,16 @@ from lburst.cli.numbers import integer
 from lburst.cli.options import add_cluster_argument, add_recording_arguments, recording_options
 from lburst.cluster.runner import Runner, open_runner
 from lburst.cluster.spec import parse_cluster
-from lburst.methods import accepts, create
-from lburst.model.network import AUTOCAST_DTYPES, CheckpointError
+from lburst.methods import accepts, check, create, with_default, with_given
+from lburst.model.network import AUTOCAST_DTYPES
 from lburst.model.runtimes import RUNTIMES
 from lburst.sfm.feature_stage import KeyframeBurst, Layout, compute_for, keyframe_features
 from lburst.sfm.inputs import InputSource, burst_name, open_bursts
 from lburst.sfm.outputs import IMAGES
 
 CUT_FILE = "cut.json"
+#: keypoints per burst of a learned method whose spec sets no top_k and no --top-k is given
+DEFAULT_TOP_K = 4000
 
 
 def method_spec(method: str | None, weights: str | None, frame_order: str | None = None) -> str:
@@ -83,7 +85,12 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         choices=["temporal", "published"],
         help="frame order for burst networks ('published' for the published LBurst weights)",
     )
-    p.add_argument("--top-k", type=integer(0), default=4000, help="keypoints per burst (learned methods)")
+    p.add_argument(
+        "--top-k",
+        type=integer(1),
+        help=f"keypoints per burst of a learned method (default: the spec's top_k=N, else {DEFAULT_TOP_K}); "
+        "an explicit --top-k that disagrees with the spec's top_k is refused",
+    )
     p.add_argument("--h5", action="store_true", help="also write an hloc-style features.h5 in --out")
     p.add_argument("--overwrite", action="store_true", help="recompute bursts that are already done")
     p.add_argument("--device", help="cpu or cuda (default: cuda if available)")
@@ -248,30 +255,25 @@ def extract_bursts(
 
 def main(args: argparse.Namespace) -> int:
     spec = method_spec(args.method, args.weights, args.frame_order)
-    options = {}
-    try:
-        cluster = parse_cluster(args.cluster) if args.cluster is not None else None
-        check_output_outside(args.out, args.bursts)
-        wanted = {
-            "top_k": str(args.top_k),
-            "device": args.device,
-            "precision": args.precision if args.precision != "fp32" else None,
-            "runtime": args.runtime,
-        }
-        options = {k: v for k, v in wanted.items() if v is not None and accepts(spec, k)}  # learned methods have them
-        extractor = create(spec, **options) if cluster is None else None  # on a cluster: one per worker
-    except (CheckpointError, FileNotFoundError, ValueError):
-        raise  # lburst.cli.main prints it as one line and exits with 2
+    # the spec's own top_k=N wins over the default; an explicit --top-k that disagrees is refused
+    spec = with_default(with_given(spec, "top_k", args.top_k, "--top-k"), "top_k", DEFAULT_TOP_K)
+    cluster = parse_cluster(args.cluster) if args.cluster is not None else None
+    check_output_outside(args.out, args.bursts)
+    wanted = {
+        "device": args.device,
+        "precision": args.precision if args.precision != "fp32" else None,
+        "runtime": args.runtime,
+    }
+    options = {k: v for k, v in wanted.items() if v is not None and accepts(spec, k)}  # learned methods have them
+    check(spec, **options)  # a bad spec or option is one line (exit 2) before any work, with --cluster too
+    extractor = create(spec, **options) if cluster is None else None  # on a cluster: one per worker
+    cut = recording_options(args)
     args.out.mkdir(parents=True, exist_ok=True)
     method = store.method_key(spec, **{k: v for k, v in options.items() if k != "device"})
     failed: list[tuple[Path, str]] = []
     finished: list[tuple[str, Path]] = []  # (features.h5 group, .npz) of every finished burst
     names: dict[str, Path] = {}
     done = 0
-    try:
-        cut = recording_options(args)
-    except ValueError:
-        raise  # lburst.cli.main prints it as one line and exits with 2
     with open_runner(cluster) as runner:
         compute = compute_for(spec, runner, extractor, options, args.threads)
         pending: list[tuple[Path, KeyframeBurst]] = []  # single bursts, mapped together

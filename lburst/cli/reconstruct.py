@@ -9,6 +9,7 @@ from pathlib import Path
 from lburst.cli.numbers import integer, real
 from lburst.cli.options import add_cluster_argument, add_matcher_argument, add_recording_arguments, recording_options
 from lburst.errors import RunFailed
+from lburst.methods import check
 from lburst.sfm.metrics import markdown_table
 from lburst.sfm.options import (
     AUTO_EXHAUSTIVE_MAX,
@@ -147,6 +148,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    check(args.method)  # a bad spec or option is one line before a cluster starts or a burst is read
     result = reconstruct_scene(
         args.scene,
         args.method,

@@ -41,11 +41,14 @@ __all__ = [
     "Spec",
     "accepts",
     "available",
+    "check",
     "create",
     "methods",
     "parse_spec",
     "register",
     "weights_file",
+    "with_default",
+    "with_given",
 ]
 
 Factory = Callable[..., Extractor]
@@ -205,17 +208,53 @@ def weights_file(spec: str) -> Path | None:
     return info.weights(inner.arg) if info.weights is not None else None
 
 
-def _build(spec: Spec, runtime: dict[str, Any]) -> Extractor:
+def _options(spec: Spec, runtime: dict[str, Any]) -> Any:
+    """The typed options of one level of ``spec`` (``runtime`` joins those of the method that
+    runs on the burst, overriding the spec's); ``LBurstValueError`` for a bad name, argument or option."""
     info = _info(spec.name, spec.text)
     if info.wraps:
-        inner = _build(spec.inner, runtime)
-        extractor = info.factory(inner, parse_options(info.options, spec.options, spec.name))
-    else:
-        if spec.arg is not None and info.arg is None:
-            raise LBurstValueError(f"method {spec.name!r} takes no argument, got {spec.arg!r}")
-        extractor = info.factory(spec.arg, parse_options(info.options, {**spec.options, **runtime}, spec.name))
+        return parse_options(info.options, spec.options, spec.name)
+    if spec.arg is not None and info.arg is None:
+        raise LBurstValueError(f"method {spec.name!r} takes no argument, got {spec.arg!r}")
+    return parse_options(info.options, {**spec.options, **runtime}, spec.name)
+
+
+def _build(spec: Spec, runtime: dict[str, Any]) -> Extractor:
+    info = _info(spec.name, spec.text)
+    options = _options(spec, runtime)
+    extractor = info.factory(_build(spec.inner, runtime) if info.wraps else spec.arg, options)
     extractor.name = spec.text
     return extractor
+
+
+def check(spec: str, **options: Any) -> None:
+    """Raise ``LBurstValueError`` (one line) where :func:`create` would refuse ``spec`` with
+    ``options`` for its names, arguments or option values, without creating anything (no weights
+    are read): a bad spec is refused before any work, where the extractor is created later or
+    elsewhere (on first use, on a cluster's workers)."""
+    level: Spec | None = parse_spec(spec)
+    while level is not None:
+        _options(level, options)
+        level = level.inner
+
+
+def with_given(spec: str, option: str, value: Any, flag: str) -> str:
+    """``spec`` with ``option=value`` given outside it (``flag``, a command-line option) for the
+    method it runs on the burst (inside any wrappers); ``spec`` itself when ``value`` is ``None``,
+    when that method has no such option, or when the spec sets the same value.  A spec that sets
+    another value is refused (``LBurstValueError`` naming both): neither silently wins."""
+    if value is None or not accepts(spec, option):
+        return spec
+    inner = _innermost(parse_spec(spec))
+    if option not in inner.options:
+        return f"{spec},{option}={value}"  # the innermost method's options end the spec
+    cls = _info(inner.name, spec).options
+    own = getattr(parse_options(cls, {option: inner.options[option]}, inner.name), option)
+    if own != getattr(parse_options(cls, {option: value}, inner.name), option):
+        raise LBurstValueError(
+            f"{flag} {value} and {option}={inner.options[option]} in method spec {spec!r} disagree; give one of them"
+        )
+    return spec
 
 
 def create(spec: str, **options: Any) -> Extractor:

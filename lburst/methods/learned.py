@@ -71,6 +71,10 @@ class LearnedOptions:
 
     def __post_init__(self) -> None:
         autocast_dtype(self.precision)  # a clear error for an unknown precision
+        if self.top_k is not None and (
+            isinstance(self.top_k, bool) or not isinstance(self.top_k, int) or self.top_k < 1
+        ):
+            raise LBurstValueError(f"top_k must be an integer >= 1 (none: every keypoint), got {self.top_k!r}")
         if isinstance(self.spread, bool) or not isinstance(self.spread, int) or not 0 <= self.spread <= 64:
             raise LBurstValueError(
                 f"spread must be an integer 0-64 (cells per side; 0: plain top-k), got {self.spread!r}"

@@ -193,7 +193,10 @@ def compute_for(
     """The per-burst ``compute`` of ``spec`` (created with ``options``) for ``runner``: in this
     process ``extractor`` or one created on first use (:class:`LazyExtractor`), with torch at
     ``threads``; on a cluster each worker's own (:class:`lburst.cluster.models.WorkerExtractor`),
-    at ``threads`` or the runner's count (one)."""
+    at ``threads`` or the runner's count (one).  A spec or option that :func:`lburst.methods.create`
+    would refuse is refused here, before any burst (:func:`lburst.methods.check`)."""
+    if extractor is None:
+        methods.check(spec, **(options or {}))
     if runner.remote:
         return WorkerExtractor(extractor_request(spec, options, threads or runner.threads))
     set_threads(threads)

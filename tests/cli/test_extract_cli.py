@@ -2,6 +2,7 @@
 
 import cv2
 import numpy as np
+import pytest
 import skimage.data
 
 from lburst.burst.io import save_burst
@@ -142,3 +143,29 @@ def test_a_foreign_npz_is_not_overwritten_and_a_nan_one_is_recomputed(tmp_path, 
     assert main(["extract", burst, "--out", str(out), "--method", "sift"]) == 0
     assert "1 bursts extracted" in capsys.readouterr().out
     assert np.isfinite(np.load(out / "b0.npz")["descriptors"]).all()
+
+
+def test_the_spec_top_k_is_kept_and_an_explicit_top_k_that_disagrees_is_refused(tmp_path, capsys):
+    burst = _small_burst(tmp_path / "b0", n=5)
+    out = tmp_path / "out"
+    assert main(["extract", str(burst), "--out", str(out), "--method", "lburst,top_k=7", "--threads", "1"]) == 0
+    assert len(np.load(out / "b0.npz")["keypoints"]) == 7  # not the --top-k default
+    capsys.readouterr()
+    assert main(["extract", str(burst), "--out", str(out), "--method", "lburst,top_k=7", "--top-k", "300"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("lburst extract: error: --top-k 300 and top_k=7") and err.count("\n") == 1
+    assert main(["extract", str(burst), "--out", str(out), "--method", "lburst,top_k=7", "--top-k", "7"]) == 0
+    assert "0 bursts extracted" in capsys.readouterr().out  # the same features: already done
+    assert main(["extract", str(burst), "--out", str(out), "--top-k", "5", "--threads", "1"]) == 0
+    assert len(np.load(out / "b0.npz")["keypoints"]) == 5
+
+
+@pytest.mark.parametrize("top_k", ["abc", "0", "-3", "1.5"])
+@pytest.mark.parametrize("command", [["extract"], ["extract", "--cluster", "local:2"], ["reconstruct"]])
+def test_a_bad_top_k_in_the_spec_is_one_line_before_any_work(tmp_path, capsys, top_k, command):
+    burst, out = _small_burst(tmp_path / "b0"), tmp_path / "out"
+    argv = [command[0], str(burst), "--out", str(out), "--method", f"merge+lburst,top_k={top_k}", *command[1:]]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"lburst {command[0]}: error: ") and "top_k" in err and err.count("\n") == 1
+    assert not out.exists()
