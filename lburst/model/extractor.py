@@ -77,7 +77,7 @@ class MultiScaleConfig:
             weights).  Without it the network sees each level's border as zero padding, to
             which lburst's weights learnt to give a low reliability, so their keypoints avoid
             the outer 16 px; with 32 px they cover it as the published model does, at about
-            15 % more time and with mixed results in 3D (docs/results.md, "A reflected border
+            15 % more time and with mixed results in 3D (docs/results/border.md, "A reflected border
             at extraction").
         warp: how weights that read aligned bursts (:attr:`LBurst.align`) get them:
             ``'rigid'`` aligns each frame by a translation (and a rotation where the burst

@@ -256,7 +256,7 @@ def check_pad(pad, what: str = "pad") -> int:
 
 def default_pad(meta: dict | None) -> int:
     """The reflected border (px) weights ask to be run with, ``meta['pad']``; 0 when they do
-    not say (published weights, and lburst's shipped ones: docs/results.md, "A reflected
+    not say (published weights, and lburst's shipped ones: docs/results/border.md, "A reflected
     border at extraction")."""
     return check_pad((meta or {}).get("pad", 0), "the weights' pad")
 
