@@ -19,7 +19,8 @@ photos, so a linear 16-bit frame is turned into what they saw:
    standard deviation / sqrt(16 N)), so ``P`` is the scene's bright end and not the
    noise's: on a moonless frame (about 6 counts at white) the 99.5th percentile of
    single pixels is 2.1 times white, of the binned mean 1.0 times.  ``target`` is 0.94,
-   the median of the same statistic over the training photos (``scripts/bright_end.py``:
+   the median of the same statistic over the training photos (``scripts/bright_end.py`` in the git history,
+   ``git show 86fe777:scripts/bright_end.py``:
    0.938 over the 680 photos, a quarter of them under 0.83), so the bright end of a
    normalised recording sits where that of a typical training photo does;
 3. ``curve='linear'`` (default): no tone curve, the gain alone, which is what a
