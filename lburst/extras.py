@@ -5,8 +5,10 @@ tqdm, scikit-image, openvino). The rest comes with extras: ``lburst[sfm]`` (pyco
 scikit-image), ``lburst[onnx]`` (onnx, onnxruntime, onnxscript), ``lburst[openvino]``
 (nncf), ``lburst[viz]`` (matplotlib), ``lburst[tensorboard]``, ``lburst[video]`` (PyAV:
 reading and writing recordings' videos), ``lburst[raw]`` (rawpy, tifffile: DNG frames)
-``lburst[evo]`` (evo, to compare trajectories; lburst's own ATE needs none) and
-``lburst[cluster]`` (Dask's ``distributed``: extraction and matching on a cluster). A module
+``lburst[evo]`` (evo, to compare trajectories; lburst's own ATE needs none),
+``lburst[cluster]`` (Dask's ``distributed``: extraction and matching on a cluster) and
+``lburst[geo]`` (pyproj, piexif, laspy, rosbags: GNSS from EXIF, DJI subtitles and ROS bags,
+ROS bags as input, georeferenced outputs). A module
 that needs one calls :func:`require`, or holds a :class:`LazyModule`, so that importing it
 costs nothing and a missing package gives a one-line message naming the extra.
 """
@@ -35,6 +37,10 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "evo": ("evo", "evo"),
     "distributed": ("dask[distributed]", "cluster"),
     "dask": ("dask[distributed]", "cluster"),
+    "pyproj": ("pyproj", "geo"),
+    "piexif": ("piexif", "geo"),
+    "laspy": ("laspy", "geo"),
+    "rosbags": ("rosbags", "geo"),
 }
 
 

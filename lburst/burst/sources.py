@@ -32,7 +32,9 @@ Sidecar files (optional), next to a video ``X.mp4`` or inside a folder ``X/``:
   (fps of a frame folder, default 30; the camera's intrinsics, taken as the calibration;
   without them COLMAP estimates the camera);
 - ``X.gt.txt`` / ``X/gt.txt``: ground-truth camera poses per frame, TUM format
-  (:mod:`lburst.tum`), timestamps on the recording's clock.
+  (:mod:`lburst.tum`), timestamps on the recording's clock;
+- ``X.SRT`` / ``X.srt`` beside a video: a DJI drone's per-frame position
+  (:mod:`lburst.geo.srt`); a folder's frames may carry theirs in EXIF (:mod:`lburst.geo.exif`).
 
 Every problem raises :class:`lburst.burst.io.BurstError` naming the file; bursts yielded
 before it stay valid.
@@ -54,6 +56,9 @@ from lburst.burst.keyframes import MotionGate, MotionTracker, thumbnail
 from lburst.burst.raw import RAW_SUFFIXES, Normalisation, normalise, read_dng
 from lburst.errors import LBurstValueError
 from lburst.extras import require
+from lburst.geo.exif import frames_track
+from lburst.geo.fixes import GnssTrack
+from lburst.geo.srt import read_srt, srt_path
 from lburst.numbers import check_integer, check_real
 
 DEFAULT_FPS = 30.0
@@ -224,6 +229,15 @@ class Recording:
     def ground_truth(self) -> Path | None:
         path = ground_truth_path(self.path)
         return path if path.is_file() else None
+
+    def gnss_track(self) -> GnssTrack | None:
+        """The GNSS fixes the recording carries, on its clock (:mod:`lburst.geo`): a video's DJI
+        ``.SRT`` beside it, or the EXIF GPS of a folder's frames; ``None`` when it has none."""
+        if self.is_video:
+            srt = srt_path(self.path)
+            return None if srt is None else read_srt(srt)
+        times = [index / self.fps for index in self.indices]
+        return frames_track(((path, t, None) for path, t in zip(self.files, times)), str(self.path))
 
     def _open_video(self):
         av = require("av", "reading a video")

@@ -21,7 +21,7 @@ from lburst.sfm.options import (
     SCENE_OVERLAP,
     ReconstructOptions,
 )
-from lburst.sfm.positions import DEFAULT_STD_M
+from lburst.sfm.positions import DEFAULT_STD_M, MAX_STD_M, MIN_STD_M, describe
 from lburst.sfm.reconstruct import reconstruct_scene
 from lburst.sfm.result import Status
 
@@ -132,16 +132,25 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--positions",
         type=Path,
         metavar="FILE",
-        help="position priors (GNSS, a flight log): lines 'NAME X Y Z', camera centres in metres in a local "
-        "Cartesian frame; the incremental mapper holds each camera near its prior and the model comes out in "
-        "that frame (lburst simulate flight writes SCENE/positions.txt)",
+        help="position priors (GNSS, a flight log): lines 'NAME X Y Z' (NAME as the scene or images/ names it), "
+        "camera centres in metres in a local Cartesian frame; the incremental mapper holds each camera near its "
+        "prior and the model comes out in that frame (lburst simulate flight writes SCENE/positions.txt); "
+        "overrides the positions the input carries",
+    )
+    parser.add_argument(
+        "--no-positions",
+        dest="input_positions",
+        action="store_false",
+        help="ignore the positions the input carries (EXIF GPS of its frames, a DJI .SRT beside a video, a bag's "
+        "NavSatFix), which are otherwise held as priors: vision alone, the model in COLMAP's own frame",
     )
     parser.add_argument(
         "--position-std",
-        type=real(0, 1e6, low_open=True),
+        type=real(MIN_STD_M, MAX_STD_M),
         default=DEFAULT_STD_M,
         metavar="M",
-        help=f"standard deviation of each coordinate of a position prior, metres (default {DEFAULT_STD_M})",
+        help=f"standard deviation of each coordinate of a position prior, metres, {MIN_STD_M:g} to {MAX_STD_M:g} "
+        f"(default {DEFAULT_STD_M})",
     )
     add_cluster_argument(parser, "the features and matching stages")
     add_recording_arguments(parser)
@@ -175,6 +184,7 @@ def main(args: argparse.Namespace) -> int:
             cluster=args.cluster,
             positions=args.positions,
             position_std=args.position_std,
+            input_positions=args.input_positions,
         ),
     )
 
@@ -189,6 +199,8 @@ def main(args: argparse.Namespace) -> int:
     )
     if result.metrics.get("camera"):
         print(f"camera: {result.metrics['camera']}")
+    for line in describe(result.positions) if result.positions else ():
+        print(line)
     if result.status == Status.PARTIAL:
         raise RunFailed(f"{result.error} (the {len(result.names)} keyframes before it were used)")
     return 0

@@ -43,6 +43,7 @@ from lburst.extras import pycolmap  # imported on first use, after cv2 (see the 
 from lburst.numbers import check_integer
 from lburst.process import folder_lock
 from lburst.sfm.join import join_models
+from lburst.sfm.prior_alignment import align_to_priors
 
 
 def atomic_path(path: str | Path):
@@ -588,10 +589,12 @@ def run_job(job_dir: str | Path) -> dict:
         map_database(db_path, job.image_dir, job_dir / "mapper", job.options, stages, priors) if len(v_pairs) else None
     )
     mapped = time.perf_counter()
+    alignment = align_to_priors(rec, job.names, job.positions) if rec is not None and priors else None
     if rec is not None:
         with stages.stage("export"):
             export_model(rec, job_dir)
     summary = summarize(rec)
+    summary["prior_alignment"] = alignment
     summary["first_last_points3D"] = shared_points3D(rec, job.names[0], job.names[-1])
     summary.update(verify_seconds=round(verified - start, 3), map_seconds=round(mapped - mapping, 3))
     if job.options.near:

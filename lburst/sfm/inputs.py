@@ -28,16 +28,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lburst import store
-from lburst.burst.io import BurstError, load_burst
+from lburst.burst.io import BurstError, burst_files, load_burst
 from lburst.burst.sources import Keyframe, Recording, RecordingOptions, is_recording, open_recording
 from lburst.cluster.runner import Runner
+from lburst.extras import MissingExtra
 from lburst.features import Features
+from lburst.geo.exif import frames_track
+from lburst.geo.fixes import GnssError, GnssTrack
 from lburst.sfm import recording as rec
 from lburst.sfm.cameras import CameraPlan, camera_origin
 from lburst.sfm.feature_stage import KeyframeBurst, Layout, compute_for, keyframe_features, safe_name, stored
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import IMAGES, copy_reference, write_scene_times
+from lburst.sfm.positions import Priors, track_priors
 from lburst.sfm.result import ReconstructionError
 from lburst.sfm.scene import Scene, SceneItem, list_scene, load_item
 
@@ -108,6 +114,33 @@ class InputSource(ABC):
     def camera_origin(self, scene: Scene, plan: CameraPlan, opts: ReconstructOptions) -> str | None:
         return None  # a report without a camera line
 
+    def known_names(self) -> list[str] | None:
+        """The names of the images before any is read (a scene's), ``None`` where only reading
+        tells them (a recording's keyframes)."""
+        return None
+
+    def gnss_track(self) -> GnssTrack | None:
+        """The GNSS fixes the input carries (:mod:`lburst.geo`), once read; ``None``: none."""
+        return None
+
+    def image_times(self, scene: Scene) -> list[float] | None:
+        """Each image's time on the clock of :meth:`gnss_track`'s fixes, ``None``: untimed."""
+        return None
+
+    def gnss_priors(self, scene: Scene, std: float) -> Priors | None:
+        """The position priors of ``scene``'s images from the fixes the input carries
+        (:func:`lburst.sfm.positions.track_priors`), ``None`` when it carries none; a missing
+        ``geo`` extra or an unreadable file gives priors of no image with a note saying why."""
+        try:
+            track = self.gnss_track()
+            if track is None:
+                return None
+            return track_priors(track, scene.names, self.image_times(scene), std)
+        except (MissingExtra, GnssError) as err:
+            return Priors(
+                np.full((len(scene.names), 3), np.nan), f"the GNSS of {self.path}", notes=[f"{err}; no priors"]
+            )
+
     def read(
         self, spec: str, out: Path, opts: ReconstructOptions, extractor=None, runner: Runner | None = None
     ) -> Keyframes:
@@ -167,6 +200,14 @@ class SceneInput(InputSource):
         for item in self.scene.items:
             key = None if method is None else store.key(method, item.path)  # the burst's content: no stale features
             yield KeyframeBurst(item.name, key, lambda item=item: load_item(item))
+
+    def known_names(self) -> list[str] | None:
+        return self.scene.names
+
+    def gnss_track(self) -> GnssTrack | None:
+        """The EXIF GPS of each image (a burst's: of its middle frame), by the image's name."""
+        frames = ((_common_file(item), None, item.name) for item in self.scene.items)
+        return frames_track(((path, t, name) for path, t, name in frames if path is not None), str(self.path))
 
     def finish(self, out: Path) -> Scene:
         if len(self.scene.items) >= 2:
@@ -232,6 +273,24 @@ class RecordingInput(InputSource):
 
     def camera_origin(self, scene: Scene, plan: CameraPlan, opts: ReconstructOptions) -> str | None:
         return camera_origin(scene, plan, opts)  # where the intrinsics came from (result.json, report.md)
+
+    def gnss_track(self) -> GnssTrack | None:
+        return None if self.recording is None else self.recording.gnss_track()
+
+    def image_times(self, scene: Scene) -> list[float] | None:
+        times = {k.name: k.time for k in self.keyframes}
+        return [times[name] for name in scene.names]
+
+
+def _common_file(item: SceneItem) -> Path | None:
+    """The file of an item's common frame (a burst's middle frame), ``None`` if it has none."""
+    if item.kind == "image":
+        return item.path
+    try:
+        files = burst_files(item.path)
+    except BurstError:
+        return None
+    return files[len(files) // 2]
 
 
 def open_input(path: str | Path, options: RecordingOptions | None = None) -> SceneInput | RecordingInput:

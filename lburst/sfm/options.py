@@ -104,7 +104,10 @@ class ReconstructOptions:
             ``'tcp://HOST:PORT'``); ``None``: in this process.
         positions: a positions file (``NAME X Y Z`` per image, :mod:`lburst.sfm.positions`):
             the incremental mapper holds each camera near its prior, ``position_std`` metres
-            on each coordinate; ``None``: no priors (vision alone).
+            on each coordinate; ``None``: the positions the input carries, if any.
+        input_positions: without ``positions``, take the positions the input carries as
+            priors (the EXIF GPS of its frames, a DJI ``.SRT``, a bag's ``NavSatFix``:
+            :mod:`lburst.geo`); ``False``: no priors (vision alone).
     """
 
     pairs: Pairs = Pairs.AUTO
@@ -131,6 +134,7 @@ class ReconstructOptions:
     positions: str | Path | None = None
     position_std: float = DEFAULT_STD_M
 
+    input_positions: bool = True
     def __post_init__(self) -> None:
         self.position_std = check_std(self.position_std)
         self.pairs = _enum(Pairs, self.pairs, "pairing")

@@ -36,6 +36,7 @@ from lburst.burst.io import atomic_path, to_uint8, write_features_h5, write_imag
 from lburst.matching import similarity
 from lburst.sfm.metrics import markdown_table
 from lburst.sfm.poses import umeyama
+from lburst.sfm.positions import describe
 from lburst.sfm.reference import Reference
 from lburst.sfm.result import ReconstructionResult, Status
 from lburst.tum import write_tum
@@ -214,6 +215,8 @@ def write_report(result: ReconstructionResult, times: dict[str, float], path: Pa
     ]
     if m.get("camera"):
         lines.append(f"Camera: {m['camera']}.")
+    if result.positions:
+        lines += ["", *(f"- {line}" for line in describe(result.positions)), ""]
     if "ate_rmse" in m:
         lines.append(
             f"ATE {m['ate_rmse']:.4f} m RMSE ({m.get('ate_percent', float('nan')):.3f} % of the path) "

@@ -34,13 +34,13 @@ from lburst.methods import with_default
 from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
 from lburst.sfm.feature_stage import utf8
-from lburst.sfm.inputs import open_input
+from lburst.sfm.inputs import InputSource, open_input
 from lburst.sfm.match import match_pairs_with_scores, report_stage
 from lburst.sfm.metrics import evaluate_against_reference, scene_metrics
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import write_outputs
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs, pair_plan
-from lburst.sfm.positions import parse_positions, read_positions
+from lburst.sfm.positions import Priors, file_priors, parse_positions, prior_fit
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult, Status, ended
 from lburst.sfm.retrieval import retrieval_pairs, vlad
 from lburst.sfm.scene import SceneError
@@ -74,14 +74,28 @@ def reconstruct_scene(
         return _reconstruct(scene_dir, method_spec, out_dir, opts, extractor, runner)
 
 
+def _priors(source: InputSource, scene, opts: ReconstructOptions) -> Priors | None:
+    """The position priors of the scene's images: the positions file's, else, unless
+    ``opts.input_positions`` is off, those the input carries (:mod:`lburst.geo`); ``None``: none."""
+    if opts.positions is not None:
+        return file_priors(opts.positions, scene.names, opts.position_std)
+    return source.gnss_priors(scene, opts.position_std) if opts.input_positions else None
+
+
 def _reconstruct(
     scene_dir: str | Path, method_spec: str, out_dir: str | Path, opts: ReconstructOptions, extractor, runner: Runner
 ) -> ReconstructionResult:
     source = open_input(scene_dir, opts.recording)  # the one question about the kind of input
     if extractor is None:  # a given extractor keeps its own top_k
         method_spec = with_default(method_spec, "top_k", source.keypoints)
-    if opts.positions is not None:
-        parse_positions(opts.positions)  # a bad file is refused before the features are computed
+    if opts.positions is not None:  # a bad file, or one naming no image, is refused before the features are computed
+        parse_positions(opts.positions)
+        try:
+            known = source.known_names()
+        except SceneError as err:
+            raise ReconstructionError(str(err)) from err
+        if known is not None:
+            file_priors(opts.positions, known, opts.position_std)
     if opts.single_camera is None:  # one camera shot a recording; a scene's photos may come from several
         opts = replace(opts, single_camera=source.one_camera)
     out = Path(out_dir)
@@ -141,9 +155,12 @@ def _reconstruct(
         },
     )
     job = ColmapJob(scene.names, str((out / "images").resolve()), cams.cameras, cams.camera_of_image, colmap_options)
-    if opts.positions is not None:
-        centres = read_positions(opts.positions, scene.names)
-        job.positions = [None if np.isnan(c).any() else c.tolist() for c in centres]
+    priors = _priors(source, scene, opts)
+    use_priors = priors is not None and priors.count > 0 and plan.mapper != "global"
+    if priors is not None and priors.count and not use_priors:
+        priors.notes.append("COLMAP's global mapper takes no priors (--mapper incremental does)")
+    if use_priors:
+        job.positions = priors.job_positions()
         job.position_std = opts.position_std
     job_dir = out / "colmap"
     job_dir.mkdir(parents=True, exist_ok=True)
@@ -201,6 +218,10 @@ def _reconstruct(
         result.poses[name] = (np.array(image["R"]), np.array(image["t"]))
         result.cameras[name] = image["camera"]
     result.registered.sort(key=scene.names.index)
+    if priors is not None:
+        centres = {name: -R.T @ t for name, (R, t) in result.poses.items()}
+        alignment = summary.get("prior_alignment") if not colmap_error else None
+        result.positions = prior_fit(priors, scene.names, centres, use_priors, opts.position_std, alignment)
     if scene.reference_path is not None and not colmap_error:
         result.metrics.update(evaluate_against_reference(result, scene.reference_path))
     result.status, result.error = ended(colmap_error, source_error, result.converged)

@@ -44,6 +44,9 @@ class ReconstructionResult:
         cameras: name -> COLMAP camera dict of the registered images (as refined).
         metrics: the table's columns (:mod:`lburst.sfm.metrics`), reference ones included
             when the scene has a reference.
+        positions: what the position priors did (:func:`lburst.sfm.positions.prior_fit`:
+            their source, count and origin, how far the model lies from them), ``None``
+            without priors.
         status: how it ended (:class:`Status`).
         error: why COLMAP failed or the recording stopped early (both when both), or ``None``.
     """
@@ -56,6 +59,7 @@ class ReconstructionResult:
     poses: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     cameras: dict[str, dict] = field(default_factory=dict)
     metrics: dict[str, float | int | str | None] = field(default_factory=dict)
+    positions: dict | None = None
     status: Status = Status.NO_MODEL
     error: str | None = None
 

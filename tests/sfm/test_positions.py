@@ -116,3 +116,94 @@ def test_with_priors_the_model_comes_out_in_their_frame(flight, tmp_path):
 def test_priors_are_refused_with_the_global_mapper():
     with pytest.raises(ValueError, match="--positions needs the incremental mapper"):
         ReconstructOptions(mapper="global", positions="gnss.txt")
+
+
+def test_a_file_may_name_the_images_as_the_outputs_do(tmp_path):
+    path = tmp_path / "positions.txt"
+    path.write_text("0000.png 1 2 3\n0002.JPG 4 5 6\n")
+    got = read_positions(path, NAMES)
+    np.testing.assert_array_equal(got[[0, 2]], [[1, 2, 3], [4, 5, 6]])
+    path.write_text("0000.png 1 2 3\n0000 1 2 3\n")
+    with pytest.raises(PositionsError, match="0000.png and 0000 are the same image"):
+        read_positions(path, NAMES)
+    path.write_text("0000.npz 1 2 3\n")
+    with pytest.raises(PositionsError, match="0000.npz is not an image of the scene"):
+        read_positions(path, NAMES)
+
+
+def test_a_scene_without_images_is_refused_in_one_line(tmp_path):
+    path = tmp_path / "positions.txt"
+    path.write_text("0000 1 2 3\n")
+    with pytest.raises(PositionsError, match="the scene has no images to give positions to"):
+        read_positions(path, [])
+
+
+@pytest.mark.parametrize(
+    "rows, says",
+    [
+        ([(8.5417, 47.3769, 400.0), (8.5419, 47.3771, 401.0), (8.5421, 47.3773, 402.0)], "longitude and latitude"),
+        ([(0.0, 0.0, 0.04), (0.008, 0.0, 0.04), (0.016, 0.001, 0.04)], "they span 0.016 m: kilometres"),
+    ],
+)
+def test_positions_spread_below_their_std_are_refused_as_not_metres(tmp_path, rows, says):
+    from lburst.sfm.positions import file_priors
+
+    path = tmp_path / "positions.txt"
+    path.write_text("".join(f"{n} {x} {y} {z}\n" for n, (x, y, z) in zip(NAMES, rows)))
+    with pytest.raises(
+        PositionsError, match=f"^{path}: the 3 positions cannot place the model with priors of 2 m"
+    ) as err:
+        file_priors(path, NAMES, 2.0)
+    assert says in str(err.value)
+
+
+def test_metres_spread_over_the_std_are_taken(tmp_path):
+    from lburst.sfm.positions import file_priors
+
+    path = tmp_path / "positions.txt"
+    path.write_text("0000 0 0 40\n0001 8 0 40\n0002 16 1 40\n")
+    priors = file_priors(path, NAMES, 2.0)
+    assert priors.count == 3 and priors.origin is None and priors.source == f"the positions file {path}"
+
+
+@pytest.mark.parametrize("std", [1e-9, 0.009, 1001.0])
+def test_a_std_outside_a_centimetre_to_a_kilometre_is_refused(std):
+    with pytest.raises(ValueError, match=r"standard deviation \(m\) must be a number >= 0.01 and <= 1000"):
+        ReconstructOptions(position_std=std)
+    assert ReconstructOptions(position_std=0.01).position_std == 0.01
+
+
+def test_few_registered_images_with_a_prior_are_said_not_to_place_the_model():
+    from lburst.sfm.positions import Priors, describe, prior_fit
+
+    names = ["a", "b", "c", "d"]
+    priors = Priors(np.array([[0, 0, 0], [8, 0, 0], [16, 0, 0], [24, 0, 0.0]]), "the positions file p.txt")
+    fit = prior_fit(priors, names, {"a": np.zeros(3), "b": np.array([8.0, 0, 3])}, True, 2.0)
+    assert fit["registered_with_prior"] == 2 and not fit["in_frame"]
+    assert fit["model_to_priors"] == {"mean": 1.5, "rms": pytest.approx(np.sqrt(4.5)), "max": 3.0}
+    lines = describe(fit)
+    assert lines[0] == "positions: 4 of 4 images from the positions file p.txt; held by the mapper"
+    assert "only 2 registered image(s) have a position, 3 are needed to place the model" in lines[-1]
+    placed = prior_fit(priors, names, {n: c for n, c in zip(names, priors.centres)}, True, 2.0)
+    assert placed["in_frame"] and placed["notes"] == []
+
+
+def test_a_model_far_from_its_priors_is_flagged():
+    from lburst.sfm.positions import Priors, prior_fit
+
+    names = ["a", "b", "c"]
+    priors = Priors(np.array([[0, 0, 0], [8, 0, 0], [16, 0, 0.0]]), "p")
+    fit = prior_fit(priors, names, {n: c + [0, 30, 0] for n, c in zip(names, priors.centres)}, True, 2.0)
+    assert "the cameras lie 30 m RMS from their positions" in fit["notes"][0]
+
+
+def test_a_name_matching_no_image_is_refused_before_any_feature_is_computed(flight, tmp_path):
+    from lburst.sfm import reconstruct_scene
+
+    scene, _ = flight
+    (tmp_path / "p.txt").write_text("0000.png 0 0 40\n0009 8 0 40\n")
+    with pytest.raises(PositionsError, match="0009 is not an image of the scene"):
+        reconstruct_scene(
+            scene, "sift", tmp_path / "out", ReconstructOptions(progress=False, positions=tmp_path / "p.txt")
+        )
+    assert not (tmp_path / "out" / "features").exists() and not (tmp_path / "out" / "images").exists()
