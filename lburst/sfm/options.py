@@ -133,8 +133,8 @@ class ReconstructOptions:
     cluster: ClusterSpec | str | None = None
     positions: str | Path | None = None
     position_std: float = DEFAULT_STD_M
-
     input_positions: bool = True
+
     def __post_init__(self) -> None:
         self.position_std = check_std(self.position_std)
         self.pairs = _enum(Pairs, self.pairs, "pairing")
