@@ -47,7 +47,7 @@ def test_every_option_of_every_command_has_help_and_shows_its_default():
         text = sub.format_help()
         assert "(default: None)" not in text and "(default: False)" not in text
     assert (
-        "(default: 4000)" in build_parser(("extract",))._subparsers._group_actions[0].choices["extract"].format_help()
+        "(default: fp32)" in build_parser(("extract",))._subparsers._group_actions[0].choices["extract"].format_help()
     )
 
 
