@@ -45,7 +45,6 @@ import hashlib
 import json
 import time
 from dataclasses import asdict, dataclass
-from enum import StrEnum
 from pathlib import Path
 
 import cv2
@@ -64,6 +63,7 @@ from lburst.methods.merge import merge_burst
 from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
 from lburst.photometric import check_jitter
 from lburst.simulate import random_motion, simulate_burst, stable_seed
+from lburst.strenum import StrEnum
 from lburst.viz import new_figure
 
 MAX_ROTATION_DEG = 25.0

@@ -5,13 +5,13 @@ docs/recordings.md)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import StrEnum
 from pathlib import Path
 
 from lburst.burst.sources import RecordingOptions
 from lburst.cluster.spec import ClusterSpec, parse_cluster
 from lburst.errors import LBurstValueError
 from lburst.sfm.positions import DEFAULT_STD_M, check_std
+from lburst.strenum import StrEnum
 
 AUTO_EXHAUSTIVE_MAX = 20  # pairs='auto' for a scene: exhaustive up to this many images, else sequential
 SCENE_OVERLAP = 10  # sequential pairs of a scene: neighbours on each side

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, field
-from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
 
 from lburst.burst.io import atomic_path, read_features_npz
 from lburst.errors import LBurstError
+from lburst.strenum import StrEnum
 
 RESULT_FILE = "result.json"
 
