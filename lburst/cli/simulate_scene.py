@@ -6,14 +6,18 @@ import argparse
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
-from lburst.errors import RunFailed
-from lburst.scenes.photo_scene import REFERENCE_DIR, REFERENCE_SOURCE, simulate_scene
+from lburst.errors import LBurstValueError, RunFailed
+from lburst.scenes.photo_scene import REFERENCE_DIR, REFERENCE_SOURCE, photo_set, simulate_scene
 from lburst.scenes.reference_spread import load_spread, summary
 from lburst.sfm.scene import list_scene
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("photos", help="folder of photos of one scene (natural order = trajectory order)")
+    parser.add_argument(
+        "photos",
+        help="folder of photos of one scene (natural order = trajectory order); a gt_cameras/ folder beside it "
+        "(Strecha's format) is the reference, with exact cameras, instead of a clean SIFT reconstruction",
+    )
     parser.add_argument("--out", required=True, help="scene folder to write")
     parser.add_argument("--frames", type=integer(1, 99), default=5, help="frames per burst (odd)")
     parser.add_argument(
@@ -63,6 +67,9 @@ def reference_options(args: argparse.Namespace) -> dict:
 
 
 def main(args: argparse.Namespace) -> int:
+    photos, cameras = photo_set(args.photos)
+    if cameras is not None and args.reference_seeds:
+        raise LBurstValueError(f"--reference-seeds: {photos} has exact cameras ({cameras}), no reference to rerun")
     ref = simulate_scene(
         args.photos,
         args.out,
@@ -77,11 +84,17 @@ def main(args: argparse.Namespace) -> int:
     if not args.no_reference:
         if ref is None:
             raise RunFailed(f"the clean photos did not reconstruct; {args.out} has no reference")
-        total = len([i for i in list_scene(args.photos).items if i.kind == "image"])
-        print(
-            f"reference: {len(ref.poses)}/{total} photos registered ({REFERENCE_SOURCE}) "
-            f"in {Path(args.out) / 'reference.json'}"
-        )
+        total = len([i for i in list_scene(photos).items if i.kind == "image"])
+        if cameras is not None:
+            print(
+                f"reference: exact cameras of {len(ref.poses)}/{total} photos ({ref.source}, {cameras}) in "
+                f"{Path(args.out) / 'reference.json'}"
+            )
+        else:
+            print(
+                f"reference: {len(ref.poses)}/{total} photos registered ({REFERENCE_SOURCE}) "
+                f"in {Path(args.out) / 'reference.json'}"
+            )
         spread = load_spread(args.out, REFERENCE_DIR) if args.reference_seeds else None
         if spread is not None:
             print(f"reference spread: {summary(spread)}")

@@ -26,6 +26,12 @@ same, else it reconstructs the clean photos again (the SIFT features stay cached
 ``reference_seeds`` also reconstruct the clean photos under those COLMAP seeds and record
 how far each lies from the reference (:mod:`lburst.scenes.reference_spread`): the precision
 below which the scene's ATE cannot rank two methods.
+
+A photo set with exact cameras in Strecha's format, a ``gt_cameras/`` folder beside the photo
+folder (``SET/images/`` and ``SET/gt_cameras/``; ``SET`` itself may be given), has them as its
+reference instead (:mod:`lburst.scenes.strecha`: source ``'strecha'``, calibrated, one
+``PINHOLE`` camera per photo scaled to its size): no clean reconstruction is made, and
+``reference_seeds`` and ``reference_options`` are not used.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ from lburst.burst.io import atomic_path, frame_name, save_burst
 from lburst.noise import noise_from_spec
 from lburst.scenes.reference import Reference
 from lburst.scenes.reference_spread import drop_spread, reference_spread
+from lburst.scenes.strecha import CAMERAS_DIR, cameras_folder, save_strecha_reference
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.poses import path_length
 from lburst.sfm.reconstruct import reconstruct_scene
@@ -103,6 +110,25 @@ def reference_options_used(scene_dir: Path) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
+def photo_set(photos: str | Path) -> tuple[Path, Path | None]:
+    """The photo folder of ``photos`` and its exact cameras' folder, if any (module docstring):
+    ``SET`` with ``images/`` and ``gt_cameras/`` is read as ``SET/images``."""
+    photos = Path(photos)
+    if (photos / "images").is_dir() and (photos / CAMERAS_DIR).is_dir():
+        photos = photos / "images"
+    return photos, cameras_folder(photos)
+
+
+def exact_reference(photos: Path, cameras: Path, scene_dir: Path) -> Reference:
+    """Write ``scene_dir/reference.json`` from the Strecha camera files in ``cameras`` and return it."""
+    items = [item for item in list_scene(photos).items if item.kind == "image"]
+    sizes = [read_image(item.path).shape[1::-1] for item in items]
+    drop_spread(scene_dir, REFERENCE_DIR)  # a spread measured a clean-SIFT reference this one replaces
+    return save_strecha_reference(
+        cameras, [(item.name, item.path, size) for item, size in zip(items, sizes)], scene_dir / "reference.json"
+    )
+
+
 def simulate_scene(
     photos: str | Path,
     out: str | Path,
@@ -121,7 +147,7 @@ def simulate_scene(
     clean-SIFT reference made with the same ``reference_options``.  ``reference_seeds``: the
     reference's spread under those seeds, in ``out/.reference/spread.json`` (module docstring).
     """
-    photos, out = Path(photos), Path(out)
+    (photos, cameras), out = photo_set(photos), Path(out)
     items = [item for item in list_scene(photos).items if item.kind == "image"]
     if not items:
         raise SceneError(f"{photos}: no photos found")
@@ -136,6 +162,8 @@ def simulate_scene(
         save_burst(burst, folder, whole=True)
     if not reference:
         return None
+    if cameras is not None:
+        return exact_reference(photos, cameras, out)
     reference_options = dict(reference_options or {})
     made = None
     if (out / "reference.json").is_file():
