@@ -47,6 +47,7 @@ import pycolmap
 from lburst.errors import LBurstValueError
 from lburst.scenes.night_flight import CONFIG_FILE, NightFlightConfig, make_city, render_view
 from lburst.scenes.raycast import intrinsics, transfer
+from lburst.sfm.poses import AUC_DEG, pose_auc
 from lburst.sfm.reference import Reference
 from lburst.sfm.scene import reference_cameras
 
@@ -56,7 +57,6 @@ SCALE_BANDS = ((1.0, 1.2), (1.2, 1.5), (1.5, np.inf))
 MIN_FIT = 30  # right matches needed to fit a pair's similarity
 CELL_PX = 40  # the grid of the coverage: the share of these cells of the later image that hold a right match
 POSE_PX = 1.0  # RANSAC threshold of the relative pose, in pixels
-AUC_DEG = (5, 10, 20)
 POSE_SEEDS = 5  # RANSAC seeds by default: every pair's pose is estimated once per seed
 POSE_TRIALS = 10_000  # at most, per estimate (COLMAP: 100,000; a pair that needs more is lost anyway)
 
@@ -152,20 +152,6 @@ def relative_pose_error(cameras, poses, a: str, b: str, ka: np.ndarray, kb: np.n
     cos_t = float(t @ t_true) / (np.linalg.norm(t) * np.linalg.norm(t_true) + 1e-12)
     err_t = np.degrees(np.arccos(np.clip(cos_t, -1, 1)))
     return float(max(err_r, min(err_t, 180 - err_t)))
-
-
-def pose_auc(errors: list[float], limits=AUC_DEG) -> dict:
-    """Area under the cumulative curve of ``errors`` (degrees) up to each limit, normalised to 1."""
-    errs = np.sort(np.asarray(errors, float))
-    recall = np.arange(1, len(errs) + 1) / len(errs)
-    errs, recall = np.r_[0.0, errs], np.r_[0.0, recall]
-    out = {}
-    for limit in limits:
-        i = np.searchsorted(errs, limit)
-        x = np.r_[errs[:i], limit]
-        y = np.r_[recall[:i], recall[i - 1]]
-        out[str(limit)] = float(np.trapezoid(y, x) / limit)
-    return out
 
 
 def putative_matches(run: Path, cameras, poses, pose_seeds: int = POSE_SEEDS, truth: dict | None = None) -> dict:

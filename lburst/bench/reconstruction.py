@@ -17,7 +17,8 @@ was remade under other seeds (``lburst simulate scene --reference-seeds``) adds 
 to the report (``reference_spread``): ATE differences below it do not rank methods.  A finished
 run is evaluated again against the scene's ``reference.json`` if that appeared or changed
 since (its SHA-1 is kept in the metrics as ``reference_sha1``), so a remade reference needs
-no rerun of the methods.  The table
+no rerun of the methods; so is one that lacks a metric added since (the pose AUC, the ATE's
+rotation part, the fitted camera: :data:`ADDED_KEYS`), from its saved poses and cameras.  The table
 (:mod:`lburst.sfm.metrics`: one row per method and scene, and each method's mean over
 scenes) is printed as markdown and written to ``OUT/table.md`` and ``OUT/results.json``.
 """
@@ -37,7 +38,7 @@ from lburst.methods.learned import results_key
 from lburst.scenes.photo_scene import REFERENCE_DIR
 from lburst.scenes.reference_spread import load_spread
 from lburst.sfm.inputs import open_input
-from lburst.sfm.metrics import aggregate, evaluate_against_reference, seed_summary
+from lburst.sfm.metrics import POSE_AUC_KEYS, aggregate, camera_metrics, evaluate_against_reference, seed_summary
 from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP, ReconstructOptions
 from lburst.sfm.reconstruct import reconstruct_scene
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult
@@ -46,16 +47,35 @@ from lburst.store import files_sha1
 
 KEY_FILE = "bench_key.json"
 
-REFERENCE_KEYS = ("reference_source", "reference_sha1", "precision", "precision_matches", "num_poses")
+REFERENCE_KEYS = ("reference_source", "reference_sha1", "precision", "precision_matches", "num_poses", *POSE_AUC_KEYS)
+#: metrics added after some results were saved (the first with a reference, the second without):
+#: computed for those from their poses and cameras
+ADDED_KEYS = ("pose_auc_5", "points3D")
 
 
-def evaluate(result, reference: Path) -> None:
-    """Replace ``result``'s reference metrics by those against ``reference`` (a ``reference.json``) and save it."""
+def evaluate(result, reference: Path | None) -> None:
+    """Replace ``result``'s reference metrics by those against ``reference`` (a ``reference.json``;
+    ``None``: none), add the metrics it lacks (:data:`ADDED_KEYS`), and save it."""
     result.metrics = {
         k: v for k, v in result.metrics.items() if k not in REFERENCE_KEYS and not k.startswith(("ate_", "rpe_"))
     }
-    result.metrics.update(evaluate_against_reference(result, reference))
+    if "points3D" not in result.metrics:
+        result.metrics["points3D"] = result.metrics.get("points3D_per_image", 0.0) * len(result.registered)
+    result.metrics.update(camera_metrics(result.cameras))
+    if reference is not None:
+        result.metrics.update(evaluate_against_reference(result, reference))
     result.save()
+
+
+def outdated(result, reference: Path) -> bool:
+    """Whether a finished ``result`` is to be evaluated again: its scene's reference was added or
+    remade since, or it lacks a metric added since (:data:`ADDED_KEYS`)."""
+    if result.failed:
+        return False
+    has_reference = reference.is_file()
+    if has_reference and result.metrics.get("reference_sha1") != file_sha1(reference):
+        return True
+    return any(k not in result.metrics for k in (ADDED_KEYS if has_reference else ADDED_KEYS[1:]))
 
 
 def scene_sha1(scene: Path) -> str:
@@ -105,12 +125,8 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
             and stored == key
         ):
             reference = scene / REFERENCE_FILE
-            if (
-                reference.is_file()
-                and not previous.failed
-                and previous.metrics.get("reference_sha1") != file_sha1(reference)
-            ):
-                evaluate(previous, reference)  # reference added or remade since
+            if outdated(previous, reference):
+                evaluate(previous, reference if reference.is_file() else None)
             return {**row, **previous.metrics, "registered": len(previous.registered), "error": colmap_error(previous)}
     try:
         result = reconstruct_scene(scene, spec, out, ReconstructOptions(**options))
@@ -145,6 +161,15 @@ def _shared_features(scene: Path, first: Path, options: dict[str, Any]) -> dict[
     return {"features": str(first / "features")}
 
 
+def _features_from(scene: Path, folder: Path, options: dict[str, Any]) -> dict[str, Any]:
+    """The features option of a scene folder's runs that read the features of another benchmark's
+    run in ``folder`` (``OTHER/<method>/<scene>``): its ``features/``, served by the store when
+    their key matches (same method and bursts), else computed."""
+    if options.get("features") is not None or not scene.is_dir() or open_input(scene, options.get("recording")).folder:
+        return {}
+    return {"features": str(folder / "features")}
+
+
 def reference_spreads(scenes: Sequence[str | Path]) -> dict[str, dict[str, Any]]:
     """Scene name -> the spread of its clean-SIFT reference under other seeds, for the scenes
     whose current reference has one (:mod:`lburst.scenes.reference_spread`)."""
@@ -162,10 +187,13 @@ def run_benchmark(
     out_dir: str | Path,
     force: bool = False,
     seeds: Sequence[int] = (0,),
+    features_from: str | Path | None = None,
     **options: Any,
 ) -> dict[str, Any]:
     """Run every method on every scene (once per seed); return ``{"rows": [...], "means": [...],
-    "seeds": [...]}`` (also written to ``OUT/results.json``); ``means`` average every run of a method."""
+    "seeds": [...]}`` (also written to ``OUT/results.json``); ``means`` average every run of a method.
+    ``features_from``: another benchmark's output folder whose runs' features every run reads
+    (those of the same method and bursts; e.g. a second camera protocol on the same scenes)."""
     out_dir = Path(out_dir)
     seeds = list(dict.fromkeys(seeds))
     if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
@@ -177,10 +205,13 @@ def run_benchmark(
         folder = out_dir / method_slug(results_key(spec))  # hashes the weights once per method
         for scene in map(Path, scenes):
             shared = _shared_features(scene, folder / run_name(scene, seeds[0]), options) if len(seeds) > 1 else {}
+            first = {}
+            if features_from is not None:  # every seed's run reads the other benchmark's seed-0 features
+                other = Path(features_from) / folder.name / run_name(scene, 0)
+                first = shared = _features_from(scene, other, options)
             for seed in seeds:  # seed 0 is ReconstructOptions' default: its runs keep their folder and key
                 extra = {} if seed == 0 else {"seed": seed}
-                if seed != seeds[0]:
-                    extra.update(shared)
+                extra.update(shared if seed != seeds[0] else first)
                 out = folder / run_name(scene, seed)
                 rows.append({**run_one(scene, spec, out, force, {**options, **extra}), "seed": seed})
     means = [
@@ -190,7 +221,7 @@ def run_benchmark(
     report = {
         "scenes": [str(s) for s in scenes],
         "methods": methods,
-        "options": options,
+        "options": options if features_from is None else {**options, "features_from": str(features_from)},
         "seeds": seeds,
         "rows": rows,
         "means": means,

@@ -32,7 +32,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--fallback-exhaustive", action="store_true")
     parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
-    parser.add_argument("--camera", choices=("auto", "default", "reference"), default="auto")
+    parser.add_argument(
+        "--camera",
+        choices=("auto", "default", "reference", "reference-focal"),
+        default="auto",
+        help="intrinsics prior, as in lburst reconstruct; reference-focal: COLMAP's default camera "
+        "(SIMPLE_RADIAL, centred) at the reference.json cameras' focal length, refined unless --fix-intrinsics",
+    )
     parser.add_argument(
         "--fix-intrinsics",
         action="store_true",
@@ -53,6 +59,12 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="run each method on each scene once per seed of COLMAP's RANSAC and mapper, and add a table of "
         "medians and ranges (default: 0); runs are repeatable for one seed and thread count",
     )
+    parser.add_argument(
+        "--features-from",
+        metavar="OTHER",
+        help="read the features of another benchmark's output folder (OTHER/<method>/<scene>/features) where "
+        "they are of the same method and bursts, e.g. to run a second camera protocol without extracting again",
+    )
     add_matcher_argument(parser)
     parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")
 
@@ -64,6 +76,7 @@ def main(args: argparse.Namespace) -> int:
         args.out,
         force=args.force,
         seeds=args.seeds,
+        features_from=args.features_from,
         pairs=args.pairs,
         overlap=args.overlap,
         fallback_exhaustive=args.fallback_exhaustive,

@@ -92,11 +92,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--camera",
-        choices=("auto", "default", "reference"),
+        choices=("auto", "default", "reference", "reference-focal"),
         default="auto",
         help="intrinsics: auto is the scene's calibration, held fixed (a recording's meta.json camera, or a "
         "reference.json that is calibrated or synthetic), else EXIF, else default; default is COLMAP's guess; "
-        "reference is the scene's reference.json cameras as a prior (refined unless --fix-intrinsics)",
+        "reference is the scene's reference.json cameras as a prior (refined unless --fix-intrinsics); "
+        "reference-focal only their focal length, in COLMAP's default camera (--camera-model, centred principal "
+        "point, no distortion), refined unless --fix-intrinsics",
     )
     parser.add_argument("--camera-model", default="SIMPLE_RADIAL")
     cameras = parser.add_mutually_exclusive_group()

@@ -11,7 +11,10 @@ scene's calibration when it has one (a recording's ``meta.json`` camera, or
 fixed, else the focal length from EXIF when a single image has one, else COLMAP's default
 ``SIMPLE_RADIAL`` with ``f = 1.2 * max(W, H)`` and a centred principal point;
 ``'default'`` always the latter; ``'reference'`` the scene's ``reference.json`` cameras
-(refined too unless ``fix_intrinsics``).
+(refined too unless ``fix_intrinsics``); ``'reference-focal'`` only their focal length: COLMAP's
+default prior (``camera_model``, centred principal point, no distortion) at each image's
+reference focal length (the mean of ``fx`` and ``fy``), refined unless ``fix_intrinsics``, as a
+user with a rough calibration (a focal length from the lens) would start.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from lburst.sfm.colmap import check_camera, default_camera, exif_camera
+from lburst.sfm.colmap import check_camera, default_camera, exif_camera, pycolmap
 from lburst.sfm.options import Camera, ReconstructOptions
 from lburst.sfm.reference import Reference
 from lburst.sfm.result import ReconstructionError
@@ -43,6 +46,11 @@ def check_reference(path: Path) -> dict[str, dict]:
     return cameras
 
 
+def mean_focal(camera: dict) -> float:
+    """The mean focal length in pixels of a COLMAP camera dict (``f``, or the mean of ``fx`` and ``fy``)."""
+    return float(pycolmap.Camera({k: camera[k] for k in ("model", "width", "height", "params")}).mean_focal_length())
+
+
 def calibrated_reference(scene: Scene) -> bool:
     """Whether the scene's ``reference.json`` cameras are a calibration (:class:`lburst.sfm.reference.Reference`)."""
     reference = scene.reference()
@@ -54,8 +62,8 @@ def scene_cameras(
 ) -> tuple[list[dict], list[int]]:
     """COLMAP camera priors (distinct dicts) and the camera index of every image of size (W, H)
     ``sizes`` (module docstring)."""
-    if options.camera == Camera.REFERENCE and scene.reference_path is None:
-        raise ReconstructionError(f"{scene.root}: camera='reference' but the scene has no reference.json")
+    if options.camera in (Camera.REFERENCE, Camera.REFERENCE_FOCAL) and scene.reference_path is None:
+        raise ReconstructionError(f"{scene.root}: camera='{options.camera}' but the scene has no reference.json")
     ref_cams = None if scene.reference_path is None else check_reference(scene.reference_path)
     if options.camera == Camera.DEFAULT or (options.camera == Camera.AUTO and not calibrated_reference(scene)):
         ref_cams = None
@@ -65,7 +73,10 @@ def scene_cameras(
         if ref_cams is not None:
             if item.name not in ref_cams:
                 raise ReconstructionError(f"{scene.reference_path}: no camera for image {item.name!r}")
-            camera = {**ref_cams[item.name], "prior_focal": True}
+            if options.camera == Camera.REFERENCE_FOCAL:
+                camera = default_camera(w, h, options.camera_model, focal=mean_focal(ref_cams[item.name]))
+            else:
+                camera = {**ref_cams[item.name], "prior_focal": True}
         elif options.camera == Camera.AUTO and scene.camera is not None:
             camera = {**scene.camera, "prior_focal": True}
         elif options.camera == Camera.AUTO and exif_source(item) is not None:

@@ -21,7 +21,17 @@ Definitions (N = images in the scene, sums over the matched pairs of the final r
   Only pairs whose two images both have reference poses count.
 - Trajectory errors (with a reference, at least 3 images registered in both): ATE and
   RPE after a Sim3 alignment of estimated to reference camera centres
-  (:mod:`lburst.sfm.poses`), ATE also as % of the reference trajectory length.
+  (:mod:`lburst.sfm.poses`), ATE also as % of the reference trajectory length, and the ATE's
+  rotation part ``ate_rot_rmse_deg`` (RMSE of each camera's orientation error after that
+  alignment, degrees).
+- ``pose_auc_5``, ``pose_auc_10``, ``pose_auc_20`` (with a reference): the relative pose AUC
+  over every pair of reference images (:func:`lburst.sfm.poses.relative_pose_errors`; a pair
+  with an unregistered image counts as failed), to 5, 10 and 20 degrees.
+- ``fitted_focal``, ``fitted_k`` (:func:`camera_metrics`): the median over the registered
+  images of their camera's focal length (px) and first radial distortion coefficient after
+  bundle adjustment (``k`` of ``SIMPLE_RADIAL``, ``k1`` of ``RADIAL`` and ``OPENCV``; absent for a
+  model without one, such as ``PINHOLE``).
+- ``points3D``: 3D points of the largest model.
 
 Averages over scenes are plain means of the per-scene values; a scene that did not
 converge contributes 0 registered images and 0 points, and no trajectory error
@@ -37,7 +47,7 @@ import numpy as np
 
 from lburst.burst.io import file_sha1
 from lburst.sfm.colmap import pycolmap
-from lburst.sfm.poses import path_length, trajectory_errors
+from lburst.sfm.poses import AUC_DEG, path_length, pose_auc, relative_pose_errors, trajectory_errors
 from lburst.sfm.reference import Reference
 from lburst.sfm.scene import reference_cameras
 
@@ -69,8 +79,15 @@ COLUMNS: list[tuple[str, str, str]] = [
     ("ate_percent", "ATE %", "{:.2f}"),
     ("rpe_trans_rmse", "RPE t", "{:.3g}"),
     ("rpe_rot_rmse_deg", "RPE R (deg)", "{:.2f}"),
+    ("ate_rot_rmse_deg", "rot. err (deg)", "{:.3f}"),
+    *((f"pose_auc_{d}", f"AUC@{d}", "{:.3f}") for d in AUC_DEG),
+    ("fitted_k", "fitted k", "{:.4f}"),
 ]
-TRAJECTORY_KEYS = ("ate_rmse", "ate_percent", "rpe_trans_rmse", "rpe_rot_rmse_deg")
+TRAJECTORY_KEYS = ("ate_rmse", "ate_percent", "rpe_trans_rmse", "rpe_rot_rmse_deg", "ate_rot_rmse_deg")
+#: the reference metrics that every pair of reference images decides, a failed run's included
+POSE_AUC_KEYS = tuple(f"pose_auc_{d}" for d in AUC_DEG)
+#: what COLMAP's bundle adjustment fitted: the first radial coefficient's index in each model's params
+RADIAL_PARAM = {"SIMPLE_RADIAL": 3, "RADIAL": 3, "OPENCV": 4, "FULL_OPENCV": 4, "SIMPLE_RADIAL_FISHEYE": 3}
 
 
 def scene_metrics(
@@ -90,9 +107,25 @@ def scene_metrics(
         "match_ratio": inliers / putative if putative else 0.0,
         "match_score": inliers / kp if kp else 0.0,
         "points3D_per_image": summary.get("num_points3D", 0) / registered if registered else 0.0,
+        "points3D": float(summary.get("num_points3D", 0)) if registered else 0.0,
         "mean_track_length": float(summary.get("mean_track_length", 0.0)),
         "mean_reprojection_error": float(summary.get("mean_reprojection_error", 0.0)),
     }
+
+
+def camera_metrics(cameras: dict[str, dict]) -> dict[str, float]:
+    """``fitted_focal`` and ``fitted_k`` (module docstring) of the registered images' COLMAP camera dicts."""
+    if not cameras:
+        return {}
+    focal = [
+        float(pycolmap.Camera({k: c[k] for k in ("model", "width", "height", "params")}).mean_focal_length())
+        for c in cameras.values()
+    ]
+    out = {"fitted_focal": float(np.median(focal))}
+    radial = [float(c["params"][RADIAL_PARAM[c["model"]]]) for c in cameras.values() if c["model"] in RADIAL_PARAM]
+    if radial:
+        out["fitted_k"] = float(np.median(radial))
+    return out
 
 
 def epipolar_distances(
@@ -181,7 +214,8 @@ def evaluate_against_reference(
     camera dicts (default: those of the file, else ``reference.camera`` for every image).
     Returns ``precision``, ``precision_matches``, ``ate_*``, ``rpe_*``, ``num_poses``
     (keys absent when they cannot be computed, e.g. fewer than 3 common registered images),
-    and for a file its ``reference_sha1`` (so a result can tell when it was remade).
+    ``pose_auc_*`` (every pair of reference images), and for a file its ``reference_sha1``
+    (so a result can tell when it was remade).
     """
     out: dict[str, Any] = {}
     if not isinstance(reference, Reference):
@@ -196,6 +230,9 @@ def evaluate_against_reference(
         precision, checked = match_precision(result.names, keypoints, pairs, inliers, reference, cameras, threshold)
         if precision is not None:
             out.update(precision=precision, precision_matches=checked)
+    ordered = {n: reference.poses[n] for n in result.names if n in reference.poses}
+    auc = pose_auc(relative_pose_errors(result.poses, ordered))
+    out.update({f"pose_auc_{d}": auc[str(d)] for d in AUC_DEG})
     common = [n for n in result.names if n in result.poses and n in reference.poses]
     if len(common) >= 3:
         try:
@@ -241,6 +278,9 @@ SEED_COLUMNS: list[tuple[str, str, str]] = [
     ("registered_pct", "reg. %", "{:.1f}"),
     ("points3D_per_image", "3D pts/img", "{:.0f}"),
     ("ate_rmse", "ATE", "{:.3g}"),
+    ("ate_rot_rmse_deg", "rot. err (deg)", "{:.3f}"),
+    *((f"pose_auc_{d}", f"AUC@{d}", "{:.3f}") for d in AUC_DEG),
+    ("fitted_k", "fitted k", "{:.4f}"),
 ]
 
 
@@ -248,7 +288,8 @@ def seed_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (method, scene), over its runs with different seeds: ``runs``, ``converged`` (how many
     made a model) and, for each :data:`SEED_COLUMNS` key, the median, min and max over the runs
     that have it (``KEY``, ``KEY_min``, ``KEY_max``); a run without a model counts 0 registered
-    images and 0 points, and no trajectory error (as in :func:`aggregate`)."""
+    images, 0 points and a pose AUC of 0 (when the others have one), and no trajectory error or
+    fitted distortion (as in :func:`aggregate`)."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for row in rows:
         groups.setdefault((row["method"], row["scene"]), []).append(row)
@@ -257,8 +298,10 @@ def seed_summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         summary: dict[str, Any] = {"method": method, "scene": scene, "runs": len(runs)}
         summary["converged"] = sum(1 for r in runs if r.get("converged"))
         for key, _, _ in SEED_COLUMNS:
-            if key in TRAJECTORY_KEYS:
+            if key in TRAJECTORY_KEYS or key == "fitted_k":
                 values = [r[key] for r in runs if r.get(key) is not None and r.get("converged")]
+            elif key in POSE_AUC_KEYS and not any(r.get(key) is not None for r in runs):
+                values = []  # no reference
             else:
                 values = [r.get(key) or 0.0 for r in runs]
             if values:

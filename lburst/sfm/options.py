@@ -44,6 +44,7 @@ class Camera(StrEnum):
     AUTO = "auto"  # the scene's calibration, held fixed; else EXIF; else COLMAP's default
     DEFAULT = "default"  # COLMAP's default prior
     REFERENCE = "reference"  # the scene's reference.json cameras
+    REFERENCE_FOCAL = "reference-focal"  # COLMAP's default camera at the reference.json cameras' focal length
 
 
 class Mapper(StrEnum):

@@ -10,9 +10,18 @@ is ``C = -R^T t`` and its camera-to-world pose ``T = [R^T | C]``.
 - **ATE** (evo ``ape``, translation part): for each image ``E_i = Q_i^-1 P_i`` with
   ``Q`` reference and ``P`` aligned estimated camera-to-world poses; the error is
   ``|trans(E_i)| = |C_est,i - C_ref,i|``; reported as RMSE (also mean, median, max).
+  Its rotation part (evo ``ape --pose_relation angle_deg``) is ``angle(rot(E_i))`` in degrees,
+  the angle between the aligned estimated and the reference orientation of each camera
+  (``ate_rot_*_deg``).
 - **RPE** (evo ``rpe``, delta = 1 frame): for consecutive images ``i, j`` of the
   trajectory ``E_ij = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``; translation error ``|trans(E_ij)|``
   and rotation error ``angle(rot(E_ij))`` in degrees; reported as RMSE and mean.
+- **Relative pose AUC** (:func:`relative_pose_errors`, :func:`pose_auc`; SuperGlue's and
+  LightGlue's evaluations, and the pose AUC of reconstruction benchmarks): for every pair of
+  reference images, the larger of the angular errors of the estimated relative rotation and
+  of the direction of the relative translation (no alignment needed), infinite when either
+  image is not registered; the area under the cumulative curve of these errors up to 5, 10
+  and 20 degrees, normalised to 1 (1: every pair exact).
 """
 
 from __future__ import annotations
@@ -112,7 +121,8 @@ def trajectory_errors(
 
     Both lists are in trajectory order; RPE uses consecutive entries.  ``length`` (the
     reference trajectory length) adds ``ate_percent`` = 100 * ATE RMSE / length.
-    Returns ``ate_rmse, ate_mean, ate_median, ate_max, rpe_trans_rmse, rpe_trans_mean,
+    Returns ``ate_rmse, ate_mean, ate_median, ate_max``, the same of the rotation part
+    (``ate_rot_rmse_deg, ...``), ``rpe_trans_rmse, rpe_trans_mean,
     rpe_rot_rmse_deg, rpe_rot_mean_deg, scale, num_poses`` (and ``ate_percent``).
     """
     if len(estimated) != len(reference):
@@ -124,6 +134,8 @@ def trajectory_errors(
     est_T = align_poses(estimated, sim)
     ate = np.linalg.norm(np.array([T[:3, 3] for T in est_T]) - ref_c, axis=1)
     out = {f"ate_{k}": v for k, v in _stats(ate).items()}
+    angles = np.array([rotation_angle_deg(Q[:3, :3].T @ P[:3, :3]) for Q, P in zip(ref_T, est_T)])
+    out.update({f"ate_rot_{k}_deg": v for k, v in _stats(angles).items()})
     trans, rot = [], []
     for i in range(len(est_T) - 1):
         rel_ref = np.linalg.inv(ref_T[i]) @ ref_T[i + 1]
@@ -149,3 +161,60 @@ def path_length(centres: np.ndarray) -> float:
     """Length of the polyline through camera centres (N, 3) in order."""
     c = np.asarray(centres, dtype=np.float64)
     return float(np.linalg.norm(np.diff(c, axis=0), axis=1).sum()) if len(c) > 1 else 0.0
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """The angle in degrees of a rotation matrix."""
+    return float(np.degrees(Rotation.from_matrix(R).magnitude()))
+
+
+def direction_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle in degrees between two vectors (180 when either is zero)."""
+    norms = np.linalg.norm(a) * np.linalg.norm(b)
+    if norms <= 1e-15:
+        return 180.0
+    return float(np.degrees(np.arccos(np.clip(np.dot(a, b) / norms, -1.0, 1.0))))
+
+
+def relative_pose(a: Pose, b: Pose) -> Pose:
+    """The pose of camera ``b`` from camera ``a``: ``(R, t)`` with ``x_b = R x_a + t``."""
+    (Ra, ta), (Rb, tb) = a, b
+    R = Rb @ Ra.T
+    return R, tb - R @ ta
+
+
+def relative_pose_errors(estimated: dict[str, Pose], reference: dict[str, Pose]) -> np.ndarray:
+    """For every pair of ``reference``'s images (in its order), the larger of the angular errors
+    (degrees) of the estimated relative rotation and of the relative translation's direction;
+    ``inf`` for a pair with an image that ``estimated`` lacks (module docstring)."""
+    names = list(reference)
+    errors = []
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            if a not in estimated or b not in estimated:
+                errors.append(np.inf)
+                continue
+            R_est, t_est = relative_pose(estimated[a], estimated[b])
+            R_ref, t_ref = relative_pose(reference[a], reference[b])
+            errors.append(max(rotation_angle_deg(R_ref.T @ R_est), direction_angle_deg(t_est, t_ref)))
+    return np.array(errors, dtype=np.float64)
+
+
+AUC_DEG = (5, 10, 20)
+
+
+def pose_auc(errors, limits=AUC_DEG) -> dict[str, float]:
+    """Area under the cumulative curve of ``errors`` (degrees; ``inf`` never counts) up to each
+    limit, normalised to 1, keyed by the limit as text."""
+    errs = np.sort(np.asarray(errors, float))
+    if len(errs) == 0:
+        return {str(limit): 0.0 for limit in limits}
+    recall = np.arange(1, len(errs) + 1) / len(errs)
+    errs, recall = np.r_[0.0, errs], np.r_[0.0, recall]
+    out = {}
+    for limit in limits:
+        i = np.searchsorted(errs, limit)
+        x = np.r_[errs[:i], limit]
+        y = np.r_[recall[:i], recall[i - 1]]
+        out[str(limit)] = float(np.trapezoid(y, x) / limit)
+    return out

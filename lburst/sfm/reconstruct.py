@@ -36,7 +36,7 @@ from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_sub
 from lburst.sfm.feature_stage import utf8
 from lburst.sfm.inputs import InputSource, open_input
 from lburst.sfm.match import match_pairs_with_scores, report_stage
-from lburst.sfm.metrics import evaluate_against_reference, scene_metrics
+from lburst.sfm.metrics import camera_metrics, evaluate_against_reference, scene_metrics
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import write_outputs
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs, pair_plan
@@ -222,6 +222,7 @@ def _reconstruct(
         centres = {name: -R.T @ t for name, (R, t) in result.poses.items()}
         alignment = summary.get("prior_alignment") if not colmap_error else None
         result.positions = prior_fit(priors, scene.names, centres, use_priors, opts.position_std, alignment)
+    result.metrics.update(camera_metrics(result.cameras))
     if scene.reference_path is not None and not colmap_error:
         result.metrics.update(evaluate_against_reference(result, scene.reference_path))
     result.status, result.error = ended(colmap_error, source_error, result.converged)

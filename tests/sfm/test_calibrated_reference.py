@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from lburst.burst.io import write_image
-from lburst.sfm.cameras import calibrated_reference, scene_cameras
+from lburst.sfm.cameras import calibrated_reference, camera_plan, scene_cameras
 from lburst.sfm.options import ReconstructOptions
+from lburst.sfm.result import ReconstructionError
 from lburst.sfm.scene import list_scene
 
 CAMERA = {"model": "PINHOLE", "width": 64, "height": 48, "params": [50.0, 50.0, 32.0, 24.0]}
@@ -49,3 +50,22 @@ def test_a_calibrated_flag_that_is_not_a_boolean_is_refused_by_file(tmp_path):
     make_scene(tmp_path, source="sift-clean", calibrated="yes")
     with pytest.raises(ValueError, match="calibrated must be true or false"):
         Reference.load(tmp_path / "reference.json")
+
+
+def test_reference_focal_starts_colmaps_default_camera_at_the_reference_focal_length(tmp_path):
+    scene = make_scene(tmp_path, source="strecha", calibrated=True)
+    options = ReconstructOptions(camera="reference-focal", single_camera=True)
+    priors, of_image = scene_cameras(scene, [(64, 48)] * 2, options)
+    # one shared SIMPLE_RADIAL camera: the reference's focal length, the principal point at the
+    # image centre and no distortion (COLMAP's default prior otherwise), refined
+    assert of_image == [0, 0]
+    assert priors == [
+        {"model": "SIMPLE_RADIAL", "width": 64, "height": 48, "params": [50.0, 32.0, 24.0, 0.0], "prior_focal": True}
+    ]
+    plan = camera_plan(scene, [(64, 48)] * 2, options)
+    assert not plan.fixed and not plan.calibrated
+    fixed = camera_plan(scene, [(64, 48)] * 2, ReconstructOptions(camera="reference-focal", fix_intrinsics=True))
+    assert fixed.fixed
+    (tmp_path / "reference.json").unlink()
+    with pytest.raises(ReconstructionError, match="reference-focal. but the scene has no reference.json"):
+        scene_cameras(list_scene(tmp_path), [(64, 48)] * 2, options)

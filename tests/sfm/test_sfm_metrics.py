@@ -147,8 +147,9 @@ def test_seed_summary_takes_medians_and_ranges_and_counts_failed_runs():
     assert s["ate_rmse"] == 1.1 and s["ate_rmse_max"] == 2.0  # the failed run's error is no trajectory
     assert t["runs"] == 1 and "ate_rmse" not in t
     table = seed_table([s, t]).splitlines()
-    assert table[2] == "| m | s | 3 | 2 | 90.0 (0.0-100.0) | 90 (0-110) | 1.1 (0.2-2) |"
-    assert table[3].endswith("| 50 (50-50) | - |")
+    # no rotation error, pose AUC (no reference) or fitted k in these runs
+    assert table[2] == "| m | s | 3 | 2 | 90.0 (0.0-100.0) | 90 (0-110) | 1.1 (0.2-2) |" + " - |" * 5
+    assert table[3].endswith("| 50 (50-50) | - |" + " - |" * 5)
 
 
 def test_benchmark_runs_each_seed_in_its_own_folder(tmp_path):
@@ -195,3 +196,34 @@ def test_benchmark_reports_the_reference_spread_of_its_current_reference(tmp_pat
     # another reference.json: the spread was not measured for it
     Reference("sift-clean", camera, poses, 3.0).save(scene / "reference.json")
     assert run_benchmark([scene], ["sift"], tmp_path / "bench", progress=False)["reference_spread"] == {}
+
+
+def test_a_second_protocol_reads_the_features_of_another_benchmark(tmp_path):
+    import numpy as np
+
+    scene = _textured_scene(tmp_path / "scene")
+    first = run_benchmark([scene], ["sift"], tmp_path / "refined", progress=False, num_threads=1)
+    folder = method_slug("sift")
+    features = tmp_path / "refined" / folder / "scene" / "features"
+    # mark the stored features: a run that reads them keeps the mark, one that computes its own does not
+    with np.load(features / "0.npz") as data:
+        stored = dict(data)
+    stored["scores"] = np.full_like(stored["scores"], 0.123)
+    np.savez(features / "0.npz", **stored)
+    report = run_benchmark(
+        [scene],
+        ["sift"],
+        tmp_path / "fixed",
+        seeds=[0, 3],
+        features_from=tmp_path / "refined",
+        progress=False,
+        num_threads=1,
+        fix_intrinsics=True,
+    )
+    for run in ("scene", "scene-seed3"):
+        key = json.loads((tmp_path / "fixed" / folder / run / "bench_key.json").read_text())["options"]
+        assert key["features"] == str(features)
+        with np.load(tmp_path / "fixed" / folder / run / "features" / "0.npz") as data:
+            assert np.all(data["scores"] == np.float32(0.123))
+    assert report["options"]["features_from"] == str(tmp_path / "refined")
+    assert first["rows"][0]["keypoints_per_image"] == report["rows"][0]["keypoints_per_image"]
