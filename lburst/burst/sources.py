@@ -30,7 +30,8 @@ Sidecar files (optional), next to a video ``X.mp4`` or inside a folder ``X/``:
 
 - ``X.meta.json`` / ``X/meta.json``: ``{"fps": ..., "camera": COLMAP camera dict}``
   (fps of a frame folder, default 30; the camera's intrinsics, taken as the calibration;
-  without them COLMAP estimates the camera);
+  without them COLMAP estimates the camera), checked when the recording is opened
+  (:mod:`lburst.burst.meta`);
 - ``X.gt.txt`` / ``X/gt.txt``: ground-truth camera poses per frame, TUM format
   (:mod:`lburst.tum`), timestamps on the recording's clock;
 - ``X.SRT`` / ``X.srt`` beside a video: a DJI drone's per-frame position
@@ -42,7 +43,6 @@ before it stay valid.
 
 from __future__ import annotations
 
-import json
 import re
 import time
 from dataclasses import dataclass, field
@@ -53,13 +53,14 @@ import numpy as np
 
 from lburst.burst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_key, read_image
 from lburst.burst.keyframes import MotionGate, MotionTracker, thumbnail
+from lburst.burst.meta import check_fps, read_meta
 from lburst.burst.raw import RAW_SUFFIXES, Normalisation, normalise, read_dng
 from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.geo.exif import frames_track
 from lburst.geo.fixes import GnssTrack
 from lburst.geo.srt import read_srt, srt_path
-from lburst.numbers import check_integer, check_real
+from lburst.numbers import check_integer
 
 DEFAULT_FPS = 30.0
 
@@ -99,7 +100,7 @@ class RecordingOptions:
         check_integer(self.every, "--every", 1)
         check_integer(self.start, "--start", 0)
         if self.fps is not None:
-            check_real(self.fps, "--fps", 0, 10000, low_open=True)
+            check_fps(self.fps)
         if self.max_frames is not None:
             check_integer(self.max_frames, "max_frames", 1)
 
@@ -199,11 +200,7 @@ class Recording:
         self.options = options
         if not self.path.exists():
             raise BurstError(f"{self.path}: no such file or folder")
-        meta = meta_path(self.path)
-        try:
-            self.meta = json.loads(meta.read_text()) if meta.is_file() else {}
-        except json.JSONDecodeError as err:
-            raise BurstError(f"{meta}: not valid JSON ({err})") from err
+        self.meta = read_meta(meta_path(self.path))
         self.is_video = self.path.is_file()
         if self.is_video:
             if self.path.stat().st_size == 0:

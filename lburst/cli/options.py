@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from lburst.burst.keyframes import MotionGate
+from lburst.burst.meta import MAX_FPS, MIN_FPS
 from lburst.burst.sources import DEFAULT_FPS, Normalisation, RecordingOptions
 from lburst.cli.numbers import integer, real
 from lburst.errors import LBurstValueError
@@ -36,8 +37,8 @@ def add_recording_arguments(p) -> None:
     g.add_argument("--start", type=integer(0), default=0, help="frame index of the first keyframe (default 0)")
     g.add_argument(
         "--fps",
-        type=real(0, 10000, low_open=True),
-        help=f"frame rate of a frame folder (default: its meta.json, else {DEFAULT_FPS:g})",
+        type=real(MIN_FPS, MAX_FPS),
+        help=f"frame rate of a frame folder, {MIN_FPS:g}-{MAX_FPS:g} (default: its meta.json, else {DEFAULT_FPS:g})",
     )
     g.add_argument(
         "--raw-gain",
