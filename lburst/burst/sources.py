@@ -348,7 +348,7 @@ class Recording:
         for frame in self._checked_frames():
             while next_key + half < frame.index:
                 yield from self._emit(next_key, buffer)
-                next_key += o.every
+                next_key = self._next_key(next_key + o.every, [*buffer, frame.index])
                 for i in [i for i in buffer if i < next_key - half]:
                     del buffer[i]
             if frame.index >= next_key - half:
@@ -356,6 +356,17 @@ class Recording:
         while buffer and next_key <= max(buffer):
             yield from self._emit(next_key, buffer)
             next_key += o.every
+
+    def _next_key(self, key: int, present: list[int]) -> int:
+        """The first keyframe of the schedule (``start + k * every``) from ``key`` on whose own frame
+        may be there, given the indices ``present`` of the frames read that may still be needed:
+        keyframes whose frame is missing are skipped anyway, so a gap in the numbering is crossed at
+        once, not one missing index at a time (a frame numbered 999999999 after 30 frames took 10^9 steps)."""
+        later = [i for i in present if i >= key]
+        if not later or min(later) <= key:
+            return key
+        every = self.options.every
+        return key + -(-(min(later) - key) // every) * every
 
     def _motion_bursts(self, gate: MotionGate) -> Iterator[tuple[Keyframe, np.ndarray]]:
         """Every frame from ``start`` on is a candidate once its window is read; a keyframe when ``gate`` says so."""
@@ -375,8 +386,8 @@ class Recording:
             buffer[frame.index] = frame
             thumbs[frame.index] = thumbnail(frame.image, gate.size)
             first_new = frame.index if newest is None else newest + 1  # frames read since the last one
-            for candidate in range(first_new - half, frame.index - half + 1):
-                yield from consider(candidate)
+            for candidate in sorted(i for i in buffer if first_new - half <= i <= frame.index - half):
+                yield from consider(candidate)  # frames read, not every index between: numbers may jump
             newest = frame.index
             for i in [i for i in buffer if i < frame.index - 2 * half]:
                 del buffer[i], thumbs[i]
