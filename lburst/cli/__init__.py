@@ -11,9 +11,10 @@ import importlib
 import os
 import sys
 import warnings
+from typing import NoReturn
 
 import lburst
-from lburst.errors import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, LBurstError
+from lburst.errors import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, LBurstError, LBurstValueError
 
 # (subcommand words, module, one-line help)
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
@@ -91,9 +92,27 @@ def _fill_help(parser: argparse.ArgumentParser) -> None:
             action.help = SHARED_HELP[action.dest]
 
 
+class UsageError(LBurstValueError):
+    """A command line that the parser refuses (a bad option value, a missing argument, an
+    unknown option); ``command`` names the (sub)command it was given to."""
+
+    def __init__(self, command: str, message: str) -> None:
+        super().__init__(message)
+        self.command = command
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are :class:`UsageError`, printed by :func:`main` as
+    one line like every error (``lburst extract: error: argument --every: ...``), not after the
+    usage (``--help`` shows that).  Subcommands' parsers are of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(self.prog.removeprefix("lburst").strip(), message)
+
+
 def build_parser(load: tuple[str, ...] | None = None) -> argparse.ArgumentParser:
     """The parser; only the subcommand ``load`` has its module imported for its options."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="lburst",
         description="Features from low-light robotic bursts.",
         epilog=EXIT_STATUS,
@@ -186,6 +205,8 @@ def main(argv: list[str] | None = None) -> int:
     except (LBurstError, OSError, ValueError) as exc:  # bad input, a failed run, the OS: one line, no traceback
         if os.environ.get("LBURST_TRACEBACK"):
             raise
+        if isinstance(exc, UsageError):  # the subcommand whose parser refused, else the one named
+            command = exc.command or " ".join(words or ())
         print(error_message(command, exc), file=sys.stderr)
         return exit_code(exc)
     except KeyboardInterrupt:
