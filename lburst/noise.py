@@ -18,11 +18,25 @@ from typing import Callable, Protocol
 import numpy as np
 
 from lburst.errors import LBurstValueError
+from lburst.numbers import check_real
 
 #: The network's input normalisation (RGB on 0..1): ImageNet's mean and std.  Kept here,
 #: free of torch, because ``gaussian-var:V`` noise is a variance in that normalised space.
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
+
+#: the largest standard deviation of ``gaussian:STD`` on the 0..255 scale: 40 times the whole
+#: range, far past noise that leaves nothing of the image (float32 would overflow near 1e38)
+MAX_STD = 10_000.0
+#: the largest variance of ``gaussian-var:V`` (a std of 7,400 on the 0..255 scale)
+MAX_VARIANCE = 1_000.0
+#: the most photons at white of ``lowlight:PHOTONS`` and ``photons=P``: daylight gives a pixel about
+#: 1e4-1e5 in a short frame, and the sensors clip (full well, converter) from a few thousand on; a
+#: bound keeps NumPy's Poisson draw (which fails near 1e19) and the arithmetic finite
+MAX_PHOTONS = 1e6
+#: the largest mean of a Poisson draw of photo-electrons: a brighter pixel (an ``exposure`` gain
+#: far above 1) saturates the sensor long before, and NumPy refuses means near 1e19
+MAX_ELECTRONS = 1e12
 
 
 class NoiseModel(Protocol):
@@ -50,12 +64,15 @@ class GaussianNoise:
 
     std: float | tuple[float, float, float]
 
+    def __post_init__(self) -> None:
+        for std in self.std if isinstance(self.std, tuple) else (self.std,):
+            check_real(std, "the standard deviation", 0, MAX_STD)
+
     @classmethod
     def from_normalized_variance(cls, variance: float) -> "GaussianNoise":
         """The paper's noise: variance ``variance`` on ImageNet-normalised values
         ``(x / 255 - mean) / std_c``, i.e. std ``sqrt(variance) * std_c * 255`` per channel."""
-        if variance < 0:
-            raise LBurstValueError(f"noise variance must be >= 0, got {variance}")
+        variance = check_real(variance, "the noise variance", 0, MAX_VARIANCE)
         return cls(tuple(float(np.sqrt(variance) * s * 255.0) for s in IMAGENET_STD))
 
     @property
@@ -113,8 +130,10 @@ class LowLightNoise:
     }
 
     def __post_init__(self) -> None:
-        if self.photons <= 0 or self.quantum_efficiency <= 0:
-            raise LBurstValueError("photons and quantum_efficiency must be positive")
+        check_real(self.photons, "photons", 0, MAX_PHOTONS, low_open=True)
+        check_real(self.quantum_efficiency, "quantum_efficiency", 0, 1, low_open=True)
+        for name in ("read_noise_e", "full_well_e", "gain_e_per_adu", "gamma"):
+            check_real(getattr(self, name), name, 0, low_open=name != "read_noise_e")
 
     @classmethod
     def preset(cls, name: str) -> "LowLightNoise":
@@ -156,7 +175,8 @@ class LowLightNoise:
         linear = np.asarray(image, np.float32) / 255.0
         if self.gamma != 1.0:
             linear = np.clip(linear, 0, 1) ** self.gamma
-        electrons = rng.poisson(np.clip(linear, 0, None) * self._electrons_per_unit()).astype(np.float32)
+        mean = np.clip(linear * np.float32(self._electrons_per_unit()), 0, MAX_ELECTRONS)
+        electrons = rng.poisson(mean).astype(np.float32)
         electrons += rng.standard_normal(electrons.shape, dtype=np.float32) * self.read_noise_e
         electrons = np.minimum(electrons, self.full_well_e)
         return np.minimum(np.round(electrons / self.gain_e_per_adu), 2**self.adc_bits - 1)
@@ -385,8 +405,7 @@ class SensorNoise:
         object.__setattr__(self, "black_bias", bias)
         if len(bias) != 4 or not all(math.isfinite(b) for b in bias):
             raise LBurstValueError(f"black_bias must be one finite value or four (R, G1, G2, B), got {self.black_bias}")
-        if not (math.isfinite(self.photons) and self.photons > 0):
-            raise LBurstValueError(f"photons must be a positive number, got {self.photons}")
+        check_real(self.photons, "photons", 0, MAX_PHOTONS, low_open=True)
         if not 0 < self.quantum_efficiency <= 1 or not (math.isfinite(self.gain) and self.gain > 0):
             raise LBurstValueError("need 0 < quantum_efficiency <= 1 and a positive gain")
         if self.read not in READ_LAWS:
@@ -481,7 +500,7 @@ class SensorNoise:
         linear = image / np.float32(255.0)
         if self.gamma != 1.0:
             linear = np.clip(linear, 0, 1) ** self.gamma
-        electrons = np.clip(linear, 0, None) * np.float32(self.photons * self.quantum_efficiency)
+        electrons = np.clip(linear * np.float32(self.photons * self.quantum_efficiency), 0, MAX_ELECTRONS)
         if self.shot_noise:
             electrons = rng.poisson(electrons)
         dn = electrons.astype(np.float32) * np.float32(self.gain)

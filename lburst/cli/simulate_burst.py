@@ -38,8 +38,8 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    noise = noise_from_spec(args.noise)  # a bad spec fails before any reading
     image = read_image(args.image) if args.image else default_photo()
-    noise = noise_from_spec(args.noise)
     burst = simulate_burst(image, args.frames, tuple(args.motion), noise, rng=args.seed)
     paths = save_burst(burst, args.out)
     print(f"wrote {len(paths)} frames ({burst.shape[2]}x{burst.shape[1]}, noise {noise.spec}) to {args.out}")

@@ -110,6 +110,7 @@ class NightFlightConfig:
             )
         if self.city.max_height >= self.altitude - 2:
             raise LBurstValueError("buildings must stay below the flight altitude")
+        _noise(self.noise)  # a bad spec fails here, before the city is built
 
     def _check_survey(self) -> None:
         """Check the survey fields and, for a survey, derive ``n_bursts`` from its path."""
