@@ -10,7 +10,7 @@ bursts come from the features store (:mod:`lburst.store`).  A ``result.json`` wi
 ``bench_key.json`` (written before the key was kept) is taken as finished.  With several
 ``seeds`` each (method, scene) runs once per seed of COLMAP's RANSAC and mapper (seed 0 in
 ``OUT/<method>/<scene>/``, seed S in ``OUT/<method>/<scene>-seedS/``, the later seeds reading
-the first one's features), since single runs on a small scene can swing as much as the gaps
+the first one's features and matches), since single runs on a small scene can swing as much as the gaps
 between methods; :func:`lburst.sfm.metrics.seed_summary`
 gives each (method, scene)'s median and range.  A photo scene whose clean-SIFT reference
 was remade under other seeds (``lburst simulate scene --reference-seeds``) adds that spread
@@ -46,6 +46,9 @@ from lburst.sfm.scene import REFERENCE_FILE
 from lburst.store import files_sha1
 
 KEY_FILE = "bench_key.json"
+#: options that do not change a run's result, left out of its key: ``matches`` gives the matches
+#: that the run would compute (:func:`lburst.sfm.match.match_or_reuse`)
+UNKEYED = ("progress", "matches")
 
 REFERENCE_KEYS = ("reference_source", "reference_sha1", "precision", "precision_matches", "num_poses", *POSE_AUC_KEYS)
 #: metrics added after some results were saved (the first with a reference, the second without):
@@ -101,7 +104,7 @@ def run_key(scene: Path, options: dict[str, Any]) -> dict[str, Any]:
     if "overlap" in options and options["overlap"] is None:
         time_ordered = open_input(scene, options.get("recording")).time_ordered
         options = {**options, "overlap": RECORDING_OVERLAP if time_ordered else SCENE_OVERLAP}
-    return {"scene": scene_sha1(scene), "options": {k: str(v) for k, v in sorted(options.items()) if k != "progress"}}
+    return {"scene": scene_sha1(scene), "options": {k: str(v) for k, v in sorted(options.items()) if k not in UNKEYED}}
 
 
 def _stored_key(out: Path) -> dict[str, Any] | None:
@@ -153,21 +156,22 @@ def run_name(scene: Path, seed: int) -> str:
 def _shared_features(scene: Path, first: Path, options: dict[str, Any]) -> dict[str, Any]:
     """A scene folder's runs with the other seeds take the features from the first seed's run
     ``first`` (its ``features/``, :attr:`ReconstructOptions.features`), which the features store
-    serves when their key matches, so only matching and mapping run again."""
+    serves when their key matches, and its matches of those features
+    (:attr:`ReconstructOptions.matches`), so only COLMAP runs again."""
     if options.get("features") is not None or not scene.is_dir():
         return {}
     if open_input(scene, options.get("recording")).folder:  # a recording's keyframes: computed again
         return {}
-    return {"features": str(first / "features")}
+    return {"features": str(first / "features"), "matches": str(first)}
 
 
 def _features_from(scene: Path, folder: Path, options: dict[str, Any]) -> dict[str, Any]:
-    """The features option of a scene folder's runs that read the features of another benchmark's
-    run in ``folder`` (``OTHER/<method>/<scene>``): its ``features/``, served by the store when
-    their key matches (same method and bursts), else computed."""
+    """The options of a scene folder's runs that read the features of another benchmark's run in
+    ``folder`` (``OTHER/<method>/<scene>``): its ``features/``, served by the store when their key
+    matches (same method and bursts), else computed, and its matches of the same features."""
     if options.get("features") is not None or not scene.is_dir() or open_input(scene, options.get("recording")).folder:
         return {}
-    return {"features": str(folder / "features")}
+    return {"features": str(folder / "features"), "matches": str(folder)}
 
 
 def reference_spreads(scenes: Sequence[str | Path]) -> dict[str, dict[str, Any]]:

@@ -100,6 +100,10 @@ class ReconstructOptions:
         features: a folder that ``lburst extract --out`` wrote: a burst's features stored
             there under the same key (:func:`lburst.store.key`: same method and burst) are
             used, not computed again; ``None``: the output folder.
+        matches: a finished run's output folder: its matches of the pairs whose two images
+            have the same features there (the same store key) are used if it matched them
+            with the same matcher, not matched again (:func:`lburst.sfm.match.match_or_reuse`);
+            ``None``: every pair is matched.
         cluster: run the features and matching stages on this cluster (:mod:`lburst.cluster`):
             a :class:`lburst.cluster.spec.ClusterSpec` or its text (``'local:4'``,
             ``'tcp://HOST:PORT'``); ``None``: in this process.
@@ -131,6 +135,7 @@ class ReconstructOptions:
     recording: RecordingOptions | None = None
     matcher: str = "mnn"
     features: str | Path | None = None
+    matches: str | Path | None = None
     cluster: ClusterSpec | str | None = None
     positions: str | Path | None = None
     position_std: float = DEFAULT_STD_M

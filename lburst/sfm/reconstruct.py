@@ -35,7 +35,7 @@ from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
 from lburst.sfm.feature_stage import utf8
 from lburst.sfm.inputs import InputSource, open_input
-from lburst.sfm.match import match_pairs_with_scores, report_stage
+from lburst.sfm.match import feature_keys, match_or_reuse, match_pairs_with_scores, report_stage
 from lburst.sfm.metrics import camera_metrics, evaluate_against_reference, scene_metrics
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import write_outputs
@@ -138,7 +138,10 @@ def _reconstruct(
         )
         loop_candidates = set(loops) - set(pairs)
         pairs = sorted(set(pairs) | loop_candidates)
-    matches, scores = match_pairs_with_scores(features, pairs, opts.progress, opts.matcher, runner)
+    reuse = (
+        None if opts.matches is None else (Path(opts.matches), scene.names, feature_keys(out / "features", scene.names))
+    )
+    matches, scores = match_or_reuse(features, pairs, opts.progress, opts.matcher, runner, reuse)
     colmap_options = ColmapOptions(
         mapper=plan.mapper,
         num_threads=opts.num_threads,

@@ -163,6 +163,7 @@ def test_benchmark_runs_each_seed_in_its_own_folder(tmp_path):
     keys = [json.loads((folder / n / "bench_key.json").read_text())["options"] for n in ("scene", "scene-seed7")]
     assert "seed" not in keys[0] and keys[1]["seed"] == "7"  # seed 0 keeps the key of runs made before seeds
     assert keys[1]["features"] == str(folder / "scene" / "features")  # seed 7 reads seed 0's features
+    assert "matches" not in keys[1]  # and its matches, which are those it would compute: not in the key
     assert report["by_seed"][0]["runs"] == 2
     for bad in ([], [-1], [True]):
         with pytest.raises(ValueError, match="seeds"):
