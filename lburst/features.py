@@ -91,6 +91,21 @@ def check_features(features: Features) -> Features:
     return features
 
 
+def check_inside(features: Features, size: tuple[int, int]) -> Features:
+    """Raise ``ValueError`` if a keypoint lies off the image of ``size`` (W, H): its pixels span
+    -0.5 to W - 0.5 (pixel centres at integers), and a keypoint may lie up to half a pixel
+    beyond that edge; else return ``features``."""
+    kp = np.asarray(features["keypoints"], np.float64).reshape(-1, 2)
+    width, height = size
+    off = (kp[:, 0] < -1) | (kp[:, 0] > width) | (kp[:, 1] < -1) | (kp[:, 1] > height)
+    if off.any():
+        x, y = kp[off][np.argmax(np.abs(kp[off]).max(axis=1))]
+        raise LBurstValueError(
+            f"{int(off.sum())} of {len(kp)} keypoints lie outside the {width}x{height} image (one at x={x:g}, y={y:g})"
+        )
+    return features
+
+
 def empty_features(dim: int = 128, binary: bool = False) -> Features:
     """Features with no keypoints."""
     return {

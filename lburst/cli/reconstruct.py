@@ -43,8 +43,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--features",
         metavar="DIR",
-        help="a folder that `lburst extract --out DIR` wrote: features it stored for the same bursts with the "
-        "same method are used, not computed again (default: --out)",
+        help="a folder that `lburst extract --out DIR` or `lburst reconstruct --out DIR` wrote: features it stored "
+        "for the same bursts with the same method are used, not computed again, once checked (a file that cannot "
+        "be right stops the run naming it; a warning says why a folder's features were not used) (default: --out)",
     )
     parser.add_argument(
         "--pairs",

@@ -15,6 +15,7 @@ which writes the same files (``--cluster``: docs/large_surveys.md).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,10 +24,11 @@ from typing import Any
 import numpy as np
 
 from lburst import methods, store
-from lburst.burst.io import BurstError, file_sha1
+from lburst.burst.io import BurstError, file_sha1, read_features_npz
 from lburst.cluster.models import WorkerExtractor, extractor_request, set_threads
 from lburst.cluster.runner import Runner
-from lburst.features import Features, check_features
+from lburst.errors import LBurstFileNotFoundError, LBurstValueError
+from lburst.features import Features, check_features, check_inside
 from lburst.sfm.outputs import write_common_frame
 from lburst.sfm.result import ReconstructionError
 
@@ -60,9 +62,6 @@ class Layout:
     def image_path(self, name: str) -> Path:
         return self.images / f"{name}.png"
 
-    def stored_paths(self, name: str) -> list[Path]:
-        return [self.features_path(name)] + [folder / f"{name}.npz" for folder in self.elsewhere]
-
 
 @dataclass(frozen=True)
 class Extracted:
@@ -75,12 +74,63 @@ class Extracted:
 
 def stored(layout: Layout, name: str, key: Any) -> Features | None:
     """The features of ``name`` stored in ``layout`` under ``key``, when its image is there and
-    is the one they describe (its SHA-1 recorded with them); else ``None``."""
-    found = store.load(layout.features_path(name), key)
-    image = layout.image_path(name)
-    if found is None or not image.is_file() or found[2].get("image_sha1") != file_sha1(image):
+    is the one they describe (its SHA-1 recorded with them) and they pass the checks of
+    :func:`load_checked`; else ``None`` (computed again)."""
+    path, image = layout.features_path(name), layout.image_path(name)
+    try:
+        features = load_checked(path, key)
+    except ValueError:
         return None
-    return found[0]
+    meta = store.read_meta(path) if features is not None else None
+    if meta is None or not image.is_file() or meta.get("image_sha1") != file_sha1(image):
+        return None
+    return features
+
+
+def _same(a: Any, b: Any) -> bool:
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+
+
+def load_checked(path: Path, key: Any, size: tuple[int, int] | None = None) -> Features | None:
+    """The features stored at ``path`` under ``key`` (with their ``image_size``), or ``None`` when
+    the file is missing or holds another key.  A file that holds ``key`` but features that cannot
+    be right (unreadable, wrong shapes, NaN, keypoints off the image, or an image other than the
+    burst's common frame of ``size`` (W, H)) is ``LBurstValueError`` naming it, never used."""
+    meta = store.read_meta(path)
+    if meta is None or not _same(meta.get("key"), key):
+        return None
+    try:
+        features = read_features_npz(path)
+        stored_size = tuple(int(v) for v in features.pop("imsize"))
+        check_inside(check_features(features), stored_size)
+        if size is not None and stored_size != tuple(size):
+            raise LBurstValueError(
+                f"they describe a {stored_size[0]}x{stored_size[1]} image, the burst's common frame is "
+                f"{size[0]}x{size[1]}"
+            )
+    except (OSError, ValueError, KeyError, IndexError, TypeError, EOFError) as exc:
+        raise LBurstValueError(
+            f"{path}: stored features of this burst and method that cannot be right ({exc}); remove the file, "
+            "or extract the bursts again"
+        ) from None
+    return features
+
+
+def stored_elsewhere(layout: Layout, name: str, key: Any, size: tuple[int, int]) -> Features | None:
+    """The features of ``name`` under ``key`` at its place in ``layout`` (a file there that cannot
+    be right is replaced), else in ``layout.elsewhere`` (such a file there is an error naming it:
+    :func:`load_checked`), else ``None``."""
+    try:
+        own = load_checked(layout.features_path(name), key, size)
+    except ValueError:
+        own = None  # ours, to be replaced
+    if own is not None:
+        return own
+    for folder in layout.elsewhere:
+        found = load_checked(folder / f"{name}.npz", key, size)
+        if found is not None:
+            return found
+    return None
 
 
 def check_target(path: Path, key: dict[str, Any]) -> None:
@@ -122,9 +172,10 @@ def compute_burst(job: BurstJob) -> bool:
     target, image = layout.features_path(burst.name), layout.image_path(burst.name)
     frames = burst.load()
     write_common_frame(image, frames)
-    found = store.find(layout.stored_paths(burst.name), burst.key) if job.reuse else None
-    features = job.compute(frames) if found is None else found[0]
-    store.save(target, features, (frames.shape[2], frames.shape[1]), burst.key, image_sha1=file_sha1(image))
+    size = (frames.shape[2], frames.shape[1])
+    found = stored_elsewhere(layout, burst.name, burst.key, size) if job.reuse else None
+    features = job.compute(frames) if found is None else found
+    store.save(target, features, size, burst.key, image_sha1=file_sha1(image))
     return found is None
 
 
@@ -181,6 +232,49 @@ def keyframe_features(
         target = layout.features_path(job.burst.name)
         yield Extracted(job.burst, store.load(target, job.burst.key)[0], computed)  # as stored
     yield from ready
+
+
+def extracted_folders(features: str | Path | None, out: Path, folder: str) -> tuple[Path, ...]:
+    """Where a reconstruction into ``out`` looks for the features that another run stored of the
+    same bursts (:attr:`Layout.elsewhere`): in ``features`` (``None``: ``out``) under ``folder``,
+    where ``lburst extract --out`` puts them (a recording's name, else none), and in
+    ``features/features``, where ``lburst reconstruct --out`` keeps them.  A ``features`` that is
+    missing or not a folder is an error naming it."""
+    if features is None:
+        return (out / folder,)
+    root = Path(features)
+    if not root.exists():
+        raise LBurstFileNotFoundError(f"--features {root}: no such folder")
+    if not root.is_dir():
+        raise LBurstValueError(
+            f"--features {root}: not a folder; give the --out folder of lburst extract or lburst reconstruct"
+        )
+    return tuple(dict.fromkeys((root / folder, root / "features")))
+
+
+def _method_text(method: dict[str, Any], wanted: dict[str, Any]) -> str:
+    options = ",".join(f"{k}={v}" for k, v in sorted(method.get("options", {}).items()))
+    older = " by other extraction code" if method.get("revision") != wanted.get("revision") else ""
+    return f"{method.get('spec')!r}{' with ' + options if options else ''}{older}"
+
+
+def why_not_stored(folders: tuple[Path, ...], method: dict[str, Any], most: int = 200) -> str:
+    """Why bursts were not found in ``folders`` (where ``--features`` pointed) for ``method``
+    (:func:`lburst.store.method_key`): no lburst features there, features of other methods (named,
+    from the first ``most`` files), or of this method but for other bursts or frames."""
+    files = [path for folder in folders if folder.is_dir() for path in sorted(folder.glob("*.npz"))][:most]
+    stored_methods = [m["key"]["method"] for m in map(store.read_meta, files) if _has_method(m)]
+    if not stored_methods:
+        return f"it holds no lburst features ({' or '.join(str(f) for f in folders)}: no .npz with lburst's key)"
+    if any(_same(m, method) for m in stored_methods):
+        return f"its features of {_method_text(method, method)} are of other bursts, or of other frames or cuts"
+    others = sorted({_method_text(m, method) for m in stored_methods})
+    listed = ", ".join(others[:3]) + (" ..." if len(others) > 3 else "")
+    return f"it holds features of {listed}, not of {_method_text(method, method)}"
+
+
+def _has_method(meta: Any) -> bool:
+    return isinstance(meta, dict) and isinstance(meta.get("key"), dict) and isinstance(meta["key"].get("method"), dict)
 
 
 def compute_for(

@@ -22,6 +22,7 @@ same files: ``OUT/images/``, the features, ``OUT/keyframes.json`` (times) and
 from __future__ import annotations
 
 import os
+import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -40,7 +41,16 @@ from lburst.geo.exif import frames_track
 from lburst.geo.fixes import GnssError, GnssTrack
 from lburst.sfm import recording as rec
 from lburst.sfm.cameras import CameraPlan, camera_origin
-from lburst.sfm.feature_stage import KeyframeBurst, Layout, compute_for, keyframe_features, safe_name, stored
+from lburst.sfm.feature_stage import (
+    KeyframeBurst,
+    Layout,
+    compute_for,
+    extracted_folders,
+    keyframe_features,
+    safe_name,
+    stored,
+    why_not_stored,
+)
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.outputs import IMAGES, copy_reference, write_scene_times
 from lburst.sfm.positions import Priors, track_priors
@@ -149,19 +159,26 @@ class InputSource(ABC):
         ``OUT/images``, taken from ``opts.features`` (``lburst extract``'s folder, by default
         ``out``) where they are stored, computed in this process or by ``runner`` on a cluster;
         then the scene (:meth:`finish`), its items' features in its order."""
-        extracted = out if opts.features is None else Path(opts.features)
-        layout = Layout(out / "features", out / IMAGES, (extracted / self.folder,))
+        layout = Layout(out / "features", out / IMAGES, extracted_folders(opts.features, out, self.folder))
         method = store.method_key(spec)
         runner = runner or Runner()
         bursts = self.keyframe_bursts(method, lambda name, key: stored(layout, name, key) is not None, out)
         named = (burst for burst in bursts if safe_name(burst.name))  # names COLMAP can store
         compute = compute_for(spec, runner, extractor)
         done: dict[str, Features] = {}
+        computed = 0
         try:
             for extracted_burst in keyframe_features(named, compute, layout, runner=runner, progress=opts.progress):
                 done[extracted_burst.burst.name] = extracted_burst.features
+                computed += extracted_burst.computed
         except BurstError as err:  # the input itself cannot be read
             raise ReconstructionError(str(err)) from err
+        if opts.features is not None and computed:  # say why the folder given was not used
+            warnings.warn(
+                f"--features {opts.features}: {computed} of {len(done)} bursts were not stored there and were "
+                f"computed: {why_not_stored(layout.elsewhere, method)}",
+                stacklevel=2,
+            )
         scene = self.finish(out)
         return Keyframes(scene, [done[item.name] for item in scene.items if item.name in done], self.error)
 

@@ -97,9 +97,10 @@ class ReconstructOptions:
             recording (video or frame folder); ``None``: the defaults.
         matcher: matcher spec (:mod:`lburst.matching`): ``'mnn'`` (mutual nearest
             neighbours), ``'ratio'``, ``'ratio,ratio=0.9'``, ...
-        features: a folder that ``lburst extract --out`` wrote: a burst's features stored
-            there under the same key (:func:`lburst.store.key`: same method and burst) are
-            used, not computed again; ``None``: the output folder.
+        features: a folder that ``lburst extract --out`` or ``lburst reconstruct --out`` wrote:
+            a burst's features stored there under the same key (:func:`lburst.store.key`: same
+            method and burst) are used, not computed again, once checked
+            (:func:`lburst.sfm.feature_stage.load_checked`); ``None``: the output folder.
         matches: a finished run's output folder: its matches of the pairs whose two images
             have the same features there (the same store key) are used if it matched them
             with the same matcher, not matched again (:func:`lburst.sfm.match.match_or_reuse`);
