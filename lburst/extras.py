@@ -16,6 +16,7 @@ costs nothing and a missing package gives a one-line message naming the extra.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from types import ModuleType
 
 from lburst.errors import LBurstError
@@ -60,6 +61,17 @@ def require(module: str, what: str | None = None) -> ModuleType:
         package, extra = EXTRAS[top]
         need = f"{what} needs {package}" if what else f"{package} is not installed"
         raise MissingExtra(f"{need}: pip install 'lburst[{extra}]'", name=module) from exc
+
+
+def check_installed(module: str, what: str | None = None) -> None:
+    """Raise :class:`MissingExtra` (the ``pip install 'lburst[EXTRA]'`` line) when ``module`` is not
+    installed, without importing it: a command that needs it later stops before any work."""
+    try:
+        found = importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):  # a parent package missing, or a module blocked in sys.modules
+        found = False
+    if not found:
+        require(module, what)  # the MissingExtra, or the import error of a module that is not an extra
 
 
 class LazyModule:

@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 
+from lburst.burst.io import save_burst
 from lburst.extras import LazyModule, MissingExtra, require
 
 
@@ -163,3 +164,23 @@ def test_every_extra_named_is_one_pyproject_defines(module, extra):
     extras = pyproject["project"]["optional-dependencies"]
     assert set(extra for _, extra in EXTRAS.values()) <= set(extras)
     assert any(req.startswith(EXTRAS[module][0]) for req in extras[extra])
+
+
+def test_reconstruct_without_pycolmap_stops_before_any_feature(tmp_path):
+    burst = np.random.default_rng(0).integers(0, 255, (3, 48, 64, 3), dtype=np.uint8)
+    for name in ("b0", "b1"):
+        save_burst(burst, tmp_path / "scene" / name)
+    out = tmp_path / "out"
+    proc = _cli(["reconstruct", str(tmp_path / "scene"), "--method", "sift", "--out", str(out)], ("pycolmap",))
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "lburst reconstruct: error: reconstruction needs pycolmap: pip install 'lburst[sfm]'"
+    assert not out.exists()  # no feature computed, no folder made
+
+
+def test_check_installed_names_the_extra_without_importing(monkeypatch):
+    from lburst.extras import check_installed
+
+    check_installed("json")
+    monkeypatch.setitem(sys.modules, "pycolmap", None)
+    with pytest.raises(MissingExtra, match=r"pip install 'lburst\[sfm\]'"):
+        check_installed("pycolmap", "reconstruction")

@@ -39,7 +39,7 @@ from typing import Callable, ContextManager, Iterator
 import numpy as np
 
 from lburst.errors import LBurstError, LBurstValueError
-from lburst.extras import pycolmap  # imported on first use, after cv2 (see the module docstring)
+from lburst.extras import MissingExtra, pycolmap  # imported on first use, after cv2 (see the module docstring)
 from lburst.numbers import check_integer
 from lburst.process import folder_lock
 from lburst.sfm.join import join_models
@@ -686,6 +686,8 @@ def check_camera(camera: dict) -> None:
         raise LBurstValueError(f"width and height must be positive integers, got {width!r} x {height!r}")
     try:
         expected = len(pycolmap.Camera.create_from_model_name(0, str(model), 1.0, width, height).params)
+    except MissingExtra:
+        raise  # no pycolmap: the extra to install, not an unknown model
     except Exception:
         raise LBurstValueError(f"unknown camera model {model!r}") from None
     values = np.asarray(params, dtype=object)

@@ -30,6 +30,7 @@ import numpy as np
 
 from lburst.burst.io import atomic_path, check_output_outside
 from lburst.cluster.runner import Runner, open_runner
+from lburst.extras import check_installed
 from lburst.methods import with_default
 from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
@@ -70,6 +71,7 @@ def reconstruct_scene(
     is returned as a result with ``status`` :attr:`Status.COLMAP_FAILED` and ``error`` set.
     """
     opts = options or ReconstructOptions()
+    check_installed("pycolmap", "reconstruction")  # without lburst[sfm]: one line before any work
     with open_runner(opts.cluster) as runner:
         return _reconstruct(scene_dir, method_spec, out_dir, opts, extractor, runner)
 
