@@ -1,7 +1,8 @@
 """Recordings as burst sources: a video or a folder of consecutive frames, cut into keyframe bursts.
 
-A *recording* is a video file (decoded with PyAV, one frame at a time) or a folder of
-consecutive frames (PNG/JPEG/TIFF, 8 or 16 bit, or DNG), sorted naturally.  A folder is
+A *recording* is a video file (decoded with PyAV, one frame at a time), a ROS bag's image
+topic (:mod:`lburst.burst.rosbag`: frames numbered in bag order, timed by their header
+stamps) or a folder of consecutive frames (PNG/JPEG/TIFF, 8 or 16 bit, or DNG), sorted naturally.  A folder is
 one when it has a ``meta.json`` or DNG frames, or, with
 :attr:`RecordingOptions.frame_folders` (the command line's ``--every`` or ``--motion``),
 any folder with frame files in it (:func:`is_recording`); without them a folder of
@@ -55,6 +56,7 @@ from lburst.burst.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, BurstError, natural_
 from lburst.burst.keyframes import MotionGate, MotionTracker, thumbnail
 from lburst.burst.meta import check_fps, read_meta
 from lburst.burst.raw import RAW_SUFFIXES, Normalisation, normalise, read_dng
+from lburst.burst.rosbag import BagReader, is_bag
 from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.geo.exif import frames_track
@@ -80,6 +82,7 @@ class RecordingOptions:
         frame_folders: a folder of plain frames (PNG/JPEG/TIFF, without ``meta.json``) is
             a recording too (:func:`is_recording`); the command line sets it when
             ``--every`` or ``--motion`` is given.  It changes no burst (not in :meth:`signature`).
+        topic: the image topic of a ROS bag (:mod:`lburst.burst.rosbag`); ``None``: its only one.
     """
 
     burst: int = 5
@@ -90,6 +93,7 @@ class RecordingOptions:
     max_frames: int | None = None
     motion: MotionGate | None = None
     frame_folders: bool = False
+    topic: str | None = None
 
     def __post_init__(self) -> None:
         check_integer(self.burst, "--burst", 1, 99)
@@ -112,7 +116,7 @@ class RecordingOptions:
             f"burst={self.burst},{spacing},start={self.start},fps={self.fps},"
             f"gain={n.gain},p={n.percentile},target={n.target},max_gain={n.max_gain},"
             f"curve={n.curve},binning={n.binning}"
-        )
+        ) + (f",topic={self.topic}" if self.topic is not None else "")
 
 
 @dataclass(frozen=True)
@@ -172,11 +176,11 @@ def frame_files(folder: Path) -> list[Path]:
 
 
 def is_recording(path: str | Path, options: RecordingOptions | None = None) -> bool:
-    """A video file, or a folder with a ``meta.json`` or with DNG frames; with
+    """A video file, a ROS bag (:func:`lburst.burst.rosbag.is_bag`), or a folder with a ``meta.json`` or with DNG frames; with
     ``options.frame_folders`` also a folder with frame files (PNG/JPEG/TIFF) in it.  Other
     folders are scenes or bursts."""
     path = Path(path)
-    if path.suffix.lower() in VIDEO_SUFFIXES and not path.is_dir():
+    if (path.suffix.lower() in VIDEO_SUFFIXES and not path.is_dir()) or is_bag(path):
         return True
     if not path.is_dir():
         return False
@@ -201,8 +205,12 @@ class Recording:
         if not self.path.exists():
             raise BurstError(f"{self.path}: no such file or folder")
         self.meta = read_meta(meta_path(self.path))
-        self.is_video = self.path.is_file()
-        if self.is_video:
+        self.bag = BagReader(self.path, options.topic) if is_bag(self.path) else None
+        self.is_video = self.path.is_file() and self.bag is None
+        if self.bag is not None:
+            self.files = sorted(self.path.iterdir()) if self.path.is_dir() else [self.path]  # its content's key
+            self.fps, self.frame_count = self._bag_rate(), self.bag.count
+        elif self.is_video:
             if self.path.stat().st_size == 0:
                 raise BurstError(f"{self.path}: empty file (zero-length video)")
             self.files: list[Path] = []
@@ -219,8 +227,15 @@ class Recording:
 
     @property
     def camera(self) -> dict | None:
-        """The camera of ``meta.json`` (a COLMAP camera dict), if any."""
+        """The camera of ``meta.json`` (a COLMAP camera dict), else a bag's ``CameraInfo``, if any."""
+        if self.bag is not None and "camera" not in self.meta:
+            return self.bag.camera()
         return self.meta.get("camera")
+
+    def _bag_rate(self) -> float:
+        """A bag's frame rate: its frames over the time from the first to the last (30 for one frame)."""
+        span = self.bag.span()
+        return (self.bag.count - 1) / span if span > 0 else DEFAULT_FPS
 
     @property
     def ground_truth(self) -> Path | None:
@@ -230,6 +245,8 @@ class Recording:
     def gnss_track(self) -> GnssTrack | None:
         """The GNSS fixes the recording carries, on its clock (:mod:`lburst.geo`): a video's DJI
         ``.SRT`` beside it, or the EXIF GPS of a folder's frames; ``None`` when it has none."""
+        if self.bag is not None:
+            return self.bag.gnss_track()
         if self.is_video:
             srt = srt_path(self.path)
             return None if srt is None else read_srt(srt)
@@ -281,7 +298,7 @@ class Recording:
         """Frames in temporal order, one at a time (module docstring).  ``frames_read`` and
         ``read_seconds`` count them and the time spent reading and decoding them."""
         limit = self.options.max_frames
-        source = self._video_frames() if self.is_video else self._folder_frames()
+        source = self._bag_frames() if self.bag else self._video_frames() if self.is_video else self._folder_frames()
         while limit is None or self.frames_read < limit:
             start = time.perf_counter()
             frame = next(source, None)
@@ -291,6 +308,10 @@ class Recording:
             self.frames_read += 1
             self.last_index = frame.index
             yield frame
+
+    def _bag_frames(self) -> Iterator[Frame]:
+        for frame in self.bag.frames():
+            yield Frame(frame.index, frame.time, frame.image, f"{self.path}: {self.bag.topic} message {frame.index}")
 
     def _folder_frames(self) -> Iterator[Frame]:
         for path, index in zip(self.files, self.indices):

@@ -16,8 +16,8 @@ def add_recording_arguments(p) -> None:
     """The command-line options of :class:`RecordingOptions` (for commands that read recordings);
     ``--every`` stays ``None`` when not given (:func:`recording_options` reads it as 10)."""
     g = p.add_argument_group(
-        "recordings (a video, or a folder of consecutive frames or DNGs; a folder of PNG/JPEG/TIFF frames "
-        "without meta.json is one only with --every or --motion)"
+        "recordings (a video, a ROS bag, or a folder of consecutive frames or DNGs; a folder of PNG/JPEG/TIFF "
+        "frames without meta.json is one only with --every or --motion)"
     )
     g.add_argument(
         "--burst",
@@ -52,6 +52,10 @@ def add_recording_arguments(p) -> None:
         default="linear",
         help="tone curve after the gain (default linear, as the networks' training noise)",
     )
+    g.add_argument(
+        "--topic",
+        help="a ROS bag's image topic (sensor_msgs/Image or CompressedImage; default: its only one)",
+    )
 
 
 def recording_options(args) -> RecordingOptions:
@@ -67,6 +71,7 @@ def recording_options(args) -> RecordingOptions:
         normalisation=Normalisation(gain=args.raw_gain, curve=args.raw_curve),
         motion=None if args.motion is None else MotionGate(args.motion),
         frame_folders=args.every is not None or args.motion is not None,
+        topic=args.topic,
     )
 
 

@@ -29,7 +29,9 @@ def _frames(folder, n, size=(96, 128), seed=0):
 
 
 def _args(**given):
-    defaults = dict(burst_frames=5, every=None, motion=None, start=0, fps=None, raw_gain="auto", raw_curve="linear")
+    defaults = dict(
+        burst_frames=5, every=None, motion=None, start=0, fps=None, raw_gain="auto", raw_curve="linear", topic=None
+    )
     return argparse.Namespace(**{**defaults, **given})
 
 
