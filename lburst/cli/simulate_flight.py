@@ -10,6 +10,7 @@ from pathlib import Path
 
 from lburst.cli.numbers import integer, real
 from lburst.errors import LBurstValueError
+from lburst.scenes import flight_gnss
 from lburst.scenes import flight_recording as recording
 from lburst.scenes.night_flight import NightFlightConfig, gnss_positions, make_night_flight
 from lburst.sfm.positions import DEFAULT_STD_M, POSITIONS_FILE, write_positions
@@ -41,6 +42,25 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
         help="also (or only) write the flight as a folder of 8-bit PNG frames, the --video frames before "
         "encoding, with gt.txt and meta.json inside",
     )
+    p.add_argument(
+        "--jpg",
+        type=Path,
+        help="also (or only) write the flight as a folder of JPEG frames with each camera's exact position in "
+        "EXIF GPS (the --png frames, on the Earth at lburst.scenes.flight_gnss.FLIGHT_ORIGIN), gt.txt and "
+        "meta.json inside",
+    )
+    p.add_argument(
+        "--srt",
+        action="store_true",
+        help="with --video: also write X.SRT beside it, a DJI drone's subtitles with each frame's exact position",
+    )
+    p.add_argument(
+        "--bag",
+        type=Path,
+        help="also (or only) write the flight as a ROS bag (X.bag: ROS 1; else a ROS 2 folder, --bag-storage): "
+        "JPEG CompressedImage, CameraInfo and NavSatFix (5 Hz, exact) topics, gt.txt beside",
+    )
+    p.add_argument("--bag-storage", choices=("sqlite3", "mcap"), default="sqlite3", help="storage of a ROS 2 --bag")
     p.add_argument(
         "--crf", type=integer(0, 51), default=16, help="H.264 quality of --video (lower: better; default 16)"
     )
@@ -155,8 +175,11 @@ def main(args: argparse.Namespace) -> int:
     if args.out is not None and args.out_dir is not None and args.out != args.out_dir:
         raise LBurstValueError(f"two scene folders given: {args.out_dir} and --out {args.out}")
     args.out = args.out or args.out_dir
-    if args.out is None and args.video is None and args.dng is None and args.png is None:
-        raise LBurstValueError("give a scene folder OUT, --video FILE.mp4, --dng FOLDER or --png FOLDER")
+    recordings = (args.video, args.dng, args.png, args.jpg, args.bag)
+    if args.out is None and all(r is None for r in recordings):
+        raise LBurstValueError("give a scene folder OUT, --video FILE.mp4, --dng, --png or --jpg FOLDER, or --bag PATH")
+    if args.srt and args.video is None:
+        raise LBurstValueError("--srt writes the subtitles of --video: give --video FILE.mp4 too")
     conflict = survey_conflict(args)
     if conflict:
         raise LBurstValueError(conflict)
@@ -168,7 +191,7 @@ def main(args: argparse.Namespace) -> int:
         print(
             f"{args.out}: {path}{cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, trajectory {ref.length:.1f} m"
         )
-    if args.video is not None or args.dng is not None or args.png is not None:
+    if any(r is not None for r in recordings):
         frames = f"{recording.frame_count(cfg)} frames at {recording.fps(cfg):g} fps, {width}x{height}"
         if args.video is not None:
             recording.write_flight_video(args.video, cfg, crf=args.crf)
@@ -179,4 +202,12 @@ def main(args: argparse.Namespace) -> int:
         if args.png is not None:
             recording.write_flight_png(args.png, cfg)
             print(f"{args.png}: {frames} (PNG); ground truth {recording.ground_truth_path(args.png)}")
+        if args.srt:
+            print(f"{flight_gnss.write_flight_srt(args.video, cfg)}: the position of every frame (DJI subtitles)")
+        if args.jpg is not None:
+            flight_gnss.write_flight_jpg(args.jpg, cfg)
+            print(f"{args.jpg}: {frames} (JPEG, EXIF GPS); ground truth {recording.ground_truth_path(args.jpg)}")
+        if args.bag is not None:
+            flight_gnss.write_flight_bag(args.bag, cfg, args.bag_storage)
+            print(f"{args.bag}: {frames} (ROS bag); ground truth {recording.ground_truth_path(args.bag)}")
     return 0

@@ -319,5 +319,10 @@ def describe(data: dict) -> list[str]:
             f"positions: the {data['registered_with_prior']} registered cameras with one lie {fit['rms']:.3g} m RMS "
             f"(mean {fit['mean']:.3g}, max {fit['max']:.3g}) from them (prior std {data['std']:g} m)"
         )
+    if data.get("georeferenced"):
+        geo = data["georeferenced"]
+        lines.append(
+            f"positions: the model in {geo['crs']}: {geo['points']} ({geo['points3D']} points), {geo['cameras']}"
+        )
     lines += [f"positions: {note}" for note in data.get("notes", [])]
     return lines

@@ -30,7 +30,9 @@ import numpy as np
 
 from lburst.burst.io import atomic_path, check_output_outside
 from lburst.cluster.runner import Runner, open_runner
-from lburst.extras import check_installed
+from lburst.extras import MissingExtra, check_installed
+from lburst.geo.frame import GeoOrigin
+from lburst.geo.outputs import write_georeferenced
 from lburst.methods import with_default
 from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
@@ -82,6 +84,17 @@ def _priors(source: InputSource, scene, opts: ReconstructOptions) -> Priors | No
     if opts.positions is not None:
         return file_priors(opts.positions, scene.names, opts.position_std)
     return source.gnss_priors(scene, opts.position_std) if opts.input_positions else None
+
+
+def _georeferenced(out: Path, origin: GeoOrigin, result: ReconstructionResult) -> dict | None:
+    """``OUT/model.las`` and ``OUT/cameras.geojson`` of a model in a GNSS frame
+    (:mod:`lburst.geo.outputs`); ``None``, with a note, without the ``geo`` extra."""
+    try:
+        poses = {name: result.poses[name] for name in result.registered}  # in the scene's order
+        return write_georeferenced(out, origin, out / "colmap" / "model", poses)
+    except MissingExtra as err:
+        result.positions["notes"].append(f"no LAS point cloud or GeoJSON cameras: {err}")
+        return None
 
 
 def _reconstruct(
@@ -227,6 +240,8 @@ def _reconstruct(
         centres = {name: -R.T @ t for name, (R, t) in result.poses.items()}
         alignment = summary.get("prior_alignment") if not colmap_error else None
         result.positions = prior_fit(priors, scene.names, centres, use_priors, opts.position_std, alignment)
+        if result.positions["in_frame"] and priors.origin is not None and not colmap_error:
+            result.positions["georeferenced"] = _georeferenced(out, priors.origin, result)
     result.metrics.update(camera_metrics(result.cameras))
     if scene.reference_path is not None and not colmap_error:
         result.metrics.update(evaluate_against_reference(result, scene.reference_path))
