@@ -277,6 +277,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
 SEED_COLUMNS: list[tuple[str, str, str]] = [
     ("registered_pct", "reg. %", "{:.1f}"),
     ("points3D_per_image", "3D pts/img", "{:.0f}"),
+    ("points3D", "3D pts", "{:.0f}"),
     ("ate_rmse", "ATE", "{:.3g}"),
     ("ate_rot_rmse_deg", "rot. err (deg)", "{:.3f}"),
     *((f"pose_auc_{d}", f"AUC@{d}", "{:.3f}") for d in AUC_DEG),

@@ -147,9 +147,9 @@ def test_seed_summary_takes_medians_and_ranges_and_counts_failed_runs():
     assert s["ate_rmse"] == 1.1 and s["ate_rmse_max"] == 2.0  # the failed run's error is no trajectory
     assert t["runs"] == 1 and "ate_rmse" not in t
     table = seed_table([s, t]).splitlines()
-    # no rotation error, pose AUC (no reference) or fitted k in these runs
-    assert table[2] == "| m | s | 3 | 2 | 90.0 (0.0-100.0) | 90 (0-110) | 1.1 (0.2-2) |" + " - |" * 5
-    assert table[3].endswith("| 50 (50-50) | - |" + " - |" * 5)
+    # no total of points (0), rotation error, pose AUC (no reference) or fitted k in these runs
+    assert table[2] == "| m | s | 3 | 2 | 90.0 (0.0-100.0) | 90 (0-110) | 0 (0-0) | 1.1 (0.2-2) |" + " - |" * 5
+    assert table[3].endswith("| 50 (50-50) | 0 (0-0) | - |" + " - |" * 5)
 
 
 def test_benchmark_runs_each_seed_in_its_own_folder(tmp_path):
