@@ -17,8 +17,11 @@ runs either.  Other runtimes of the exported graph (OpenVINO, int8): :mod:`lburs
 from __future__ import annotations
 
 import json
+import logging
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import torch
@@ -39,6 +42,23 @@ from lburst.model.network import (
 #: names of the exported graph's input and outputs
 INPUT_NAME = "burst"
 OUTPUT_NAMES = ("repeatability", "reliability", "half")
+#: torch's exporter logs a warning for each torchvision op it cannot register without torchvision
+#: (nms, roi_align, ...), ops that no lburst network holds
+EXPORTER_LOGGER = "torch.onnx._internal.exporter._registration"
+
+
+@contextmanager
+def _quiet_exporter() -> Iterator[None]:
+    """torch's ONNX exporter without its warnings about ops lburst's networks do not use."""
+    logger = logging.getLogger(EXPORTER_LOGGER)
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        logger.setLevel(level)
 
 
 def export_onnx(checkpoint: str | Path, out: str | Path, opset: int = 18) -> Path:
@@ -65,8 +85,7 @@ def export_network_onnx(net: LBurstNet | LiteNet, out: str | Path, meta: dict | 
     example = torch.randn(1, net.config.in_channels, 96, 128)
     height, width = torch.export.Dim("height", min=32, max=8192), torch.export.Dim("width", min=32, max=8192)
     out = Path(out)
-    with atomic_path(out) as tmp, warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with atomic_path(out) as tmp, _quiet_exporter():
         torch.onnx.export(
             core,
             (example,),

@@ -3,6 +3,7 @@ option, one-line errors (no traceback) for bad input and operating-system errors
 the bf16 and CUDA checks, and clean-up of temporaries that a killed writer left."""
 
 import errno
+import importlib.util
 import os
 import subprocess
 import sys
@@ -239,3 +240,24 @@ def test_a_usage_error_is_one_line_without_the_usage(argv, line, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith(line) and err.count("\n") == 1, err
+
+
+def test_the_exporter_says_nothing_of_the_torchvision_ops_it_skips(capfd):
+    registration = pytest.importorskip("torch.onnx._internal.exporter._registration")
+    if importlib.util.find_spec("torchvision") is not None:
+        pytest.skip("torchvision is installed: torch's exporter has nothing to skip")
+    from lburst.model.onnx import _quiet_exporter
+
+    with _quiet_exporter():
+        assert registration._get_overload("torchvision::nms") is None  # the call that warned
+    assert capfd.readouterr().err == ""
+
+
+@pytest.mark.slow
+def test_export_onnx_prints_what_it_wrote_and_no_exporter_warnings(tmp_path):
+    pytest.importorskip("onnxscript")
+    from lburst.weights import weights_path
+
+    proc = _cli("export", "onnx", weights_path("lburst-b5-lite"), "--out", tmp_path / "m.onnx")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == "" and proc.stdout == f"wrote {tmp_path / 'm.onnx'}\n"  # no torchvision warnings
