@@ -42,6 +42,7 @@ from lburst.cli.numbers import integer
 from lburst.cli.options import add_cluster_argument, add_recording_arguments, recording_options
 from lburst.cluster.runner import Runner, open_runner
 from lburst.cluster.spec import parse_cluster
+from lburst.errors import LBurstFileNotFoundError
 from lburst.methods import accepts, check, create, with_default, with_given
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.model.runtimes import RUNTIMES
@@ -258,6 +259,10 @@ def main(args: argparse.Namespace) -> int:
     # the spec's own top_k=N wins over the default; an explicit --top-k that disagrees is refused
     spec = with_default(with_given(spec, "top_k", args.top_k, "--top-k"), "top_k", DEFAULT_TOP_K)
     cluster = parse_cluster(args.cluster) if args.cluster is not None else None
+    missing = [path for path in args.bursts if not path.exists()]
+    if missing:  # nothing done, no --out made: a typo is not a burst that failed
+        more = f" (and {len(missing) - 1} more inputs)" if len(missing) > 1 else ""
+        raise LBurstFileNotFoundError(f"{missing[0]}: no such file or folder{more}")
     check_output_outside(args.out, args.bursts)
     wanted = {
         "device": args.device,

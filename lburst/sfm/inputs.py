@@ -183,12 +183,21 @@ class InputSource(ABC):
         return Keyframes(scene, [done[item.name] for item in scene.items if item.name in done], self.error)
 
 
+#: the most frames a burst folder holds (as ``--burst``): a folder with more is a recording
+LONGEST_BURST = 99
+
+
 class BurstInput(InputSource):
     """One burst: a folder of frames, an image or a whole video (:func:`lburst.burst.io.load_burst`)."""
 
     def keyframe_bursts(self, method=None, stored=None, out=None) -> Iterator[KeyframeBurst]:
         if not self.path.exists():
             raise BurstError(f"{self.path}: no such file or folder")
+        if self.path.is_dir() and (count := len(burst_files(self.path))) > LONGEST_BURST:
+            raise BurstError(  # said before its frames are read
+                f"{self.path}: {count} frames, more than a burst holds ({LONGEST_BURST}); a recording? "
+                "--every K or --motion F cuts it into keyframe bursts"
+            )
         key = None if method is None else store.key(method, self.path)
         yield KeyframeBurst(burst_name(self.path), key, lambda: load_burst(self.path))
 

@@ -18,11 +18,13 @@ def _burst_folder(tmp_path):
 
 
 def test_extract_writes_features_resumes_and_reports_bad_bursts(tmp_path, capsys):
-    good, bad = _burst_folder(tmp_path), tmp_path / "missing"
+    good, bad = _burst_folder(tmp_path), tmp_path / "broken"
+    bad.mkdir()
+    (bad / "0.png").write_bytes(b"not a PNG")
     out = tmp_path / "features"
     assert main(["extract", str(good), str(bad), "--out", str(out), "--top-k", "300", "--h5"]) == 1
     captured = capsys.readouterr()
-    assert "1 bursts extracted" in captured.out and "missing" in captured.err
+    assert "1 bursts extracted" in captured.out and "broken" in captured.err
     feats = np.load(out / "burst_01.npz")
     assert 0 < len(feats["keypoints"]) <= 300
     assert np.all(feats["keypoints"][:, 0] <= 191) and np.all(feats["keypoints"][:, 1] <= 143)
@@ -110,10 +112,12 @@ def test_a_second_h5_run_keeps_the_first_runs_bursts(tmp_path):
 def test_features_h5_is_written_when_no_burst_finished(tmp_path, capsys):
     import h5py
 
-    out = tmp_path / "out"
-    assert main(["extract", str(tmp_path / "missing"), "--out", str(out), "--method", "sift", "--h5"]) == 1
+    out, broken = tmp_path / "out", tmp_path / "broken"
+    broken.mkdir()
+    (broken / "0.png").write_bytes(b"not a PNG")
+    assert main(["extract", str(broken), "--out", str(out), "--method", "sift", "--h5"]) == 1
     err = capsys.readouterr().err
-    assert "missing: no such file or folder" in err and "features.h5" not in err
+    assert "broken" in err and "features.h5" not in err
     with h5py.File(out / "features.h5") as f:
         assert list(f) == []
     assert [p.name for p in out.iterdir()] == ["features.h5"]  # no temporary left
@@ -169,3 +173,20 @@ def test_a_bad_top_k_in_the_spec_is_one_line_before_any_work(tmp_path, capsys, t
     err = capsys.readouterr().err
     assert err.startswith(f"lburst {command[0]}: error: ") and "top_k" in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_a_missing_input_is_refused_before_any_work(tmp_path, capsys):
+    good, out = _small_burst(tmp_path / "b0"), tmp_path / "out"
+    assert main(["extract", str(good), str(tmp_path / "typo"), "--out", str(out), "--method", "sift"]) == 2
+    assert capsys.readouterr().err == f"lburst extract: error: {tmp_path / 'typo'}: no such file or folder\n"
+    assert not out.exists()  # no output folder, nothing extracted
+
+
+def test_a_folder_of_more_frames_than_a_burst_says_how_to_cut_it_before_reading_them(tmp_path, capsys):
+    frames = tmp_path / "recording"
+    frames.mkdir()
+    for i in range(120):
+        (frames / f"f{i:03d}.png").write_bytes(b"")  # never read: the count alone tells
+    assert main(["extract", str(frames), "--out", str(tmp_path / "out"), "--method", "sift"]) == 1
+    err = capsys.readouterr().err
+    assert "120 frames, more than a burst holds (99); a recording? --every K or --motion F cuts it" in err
