@@ -198,6 +198,29 @@ def test_cluster_specs_are_read():
     assert str(parse_cluster("local:3")) == "local:3" and parse_cluster("local:3").local
 
 
+def test_a_scheduler_address_where_nothing_listens_is_refused_before_the_client_waits(tmp_path, capsys, monkeypatch):
+    import socket
+
+    from lburst.burst.io import save_burst
+
+    with socket.socket() as probe:  # a port that nothing listens on once closed
+        probe.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{probe.getsockname()[1]}"
+
+    def client(*args, **kwargs):
+        raise AssertionError("Dask's client started, to retry for 60 s")
+
+    monkeypatch.setattr(distributed, "Client", client)
+    save_burst(np.zeros((3, 32, 32, 3), np.uint8), tmp_path / "b0")
+    argv = ["extract", str(tmp_path / "b0"), "--out", str(tmp_path / "out"), "--method", "sift", "--cluster", address]
+    assert lburst_main(argv) == 2
+    assert (
+        capsys.readouterr().err
+        == f"lburst extract: error: --cluster {address}: no scheduler answers there (Connection refused)\n"
+    )
+    assert not (tmp_path / "out").exists()
+
+
 def test_reconstruct_runs_its_features_and_matching_on_the_cluster_as_in_one_process(flight, cluster, tmp_path):
     import h5py
     import torch

@@ -273,13 +273,13 @@ def main(args: argparse.Namespace) -> int:
     check(spec, **options)  # a bad spec or option is one line (exit 2) before any work, with --cluster too
     extractor = create(spec, **options) if cluster is None else None  # on a cluster: one per worker
     cut = recording_options(args)
-    args.out.mkdir(parents=True, exist_ok=True)
     method = store.method_key(spec, **{k: v for k, v in options.items() if k != "device"})
     failed: list[tuple[Path, str]] = []
     finished: list[tuple[str, Path]] = []  # (features.h5 group, .npz) of every finished burst
     names: dict[str, Path] = {}
     done = 0
-    with open_runner(cluster) as runner:
+    with open_runner(cluster) as runner:  # a cluster that cannot be reached leaves no --out
+        args.out.mkdir(parents=True, exist_ok=True)
         compute = compute_for(spec, runner, extractor, options, args.threads)
         pending: list[tuple[Path, KeyframeBurst]] = []  # single bursts, mapped together
         for path in args.bursts:

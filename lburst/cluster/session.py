@@ -10,6 +10,7 @@ tasks again elsewhere, so a killed worker costs its task's time, not the run.
 from __future__ import annotations
 
 import logging
+import socket
 from contextlib import contextmanager
 from typing import Any, Iterator
 
@@ -19,6 +20,9 @@ from lburst.extras import require
 
 #: seconds to wait for a scheduler to answer (a remote cluster), or for a local cluster's workers
 CONNECT_TIMEOUT_S = 60
+#: seconds to wait for a TCP connection to a remote scheduler's port before the client starts: a
+#: scheduler that is not there (connection refused, no route) is said at once, not after CONNECT_TIMEOUT_S
+REACH_TIMEOUT_S = 5
 
 #: Dask's environment for the worker processes it spawns, less ``MALLOC_TRIM_THRESHOLD_``:
 #: Dask sets it (65536) to hand freed memory back to the system, which also fixes glibc's
@@ -52,6 +56,7 @@ def open_cluster(spec: ClusterSpec) -> Iterator[Any]:
                 )
             client = distributed.Client(cluster)
         else:
+            check_reachable(spec)
             client = distributed.Client(spec.address, timeout=CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError) as exc:
         if cluster is not None:
@@ -63,6 +68,17 @@ def open_cluster(spec: ClusterSpec) -> Iterator[Any]:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def check_reachable(spec: ClusterSpec) -> None:
+    """:class:`ClusterError` unless something accepts a TCP connection at the scheduler address of
+    ``spec`` within :data:`REACH_TIMEOUT_S` (Dask's client would retry for :data:`CONNECT_TIMEOUT_S`)."""
+    host, _, port = str(spec.address).split("://", 1)[1].rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=REACH_TIMEOUT_S).close()
+    except OSError as exc:
+        why = exc.strerror or str(exc) or type(exc).__name__
+        raise ClusterError(f"--cluster {spec}: no scheduler answers there ({why})") from None
 
 
 def worker_count(client: Any) -> int:
