@@ -16,7 +16,7 @@ which writes the same files (``--cluster``: docs/large_surveys.md).
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sized
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -200,7 +200,8 @@ def keyframe_features(
     by default this process).  ``reuse``: take stored features (``False``: compute every
     burst again); ``protect``: refuse to replace a file of someone else's or of another burst
     (:func:`check_target`).  ``failed(burst, error)``: a burst that fails is reported there and
-    skipped (by default its error ends the loop).  ``progress``: a bar over computed bursts."""
+    skipped (by default its error ends the loop).  ``progress``: a bar over the bursts to compute,
+    with their count when ``bursts`` is a sequence (then checked for stored features first)."""
     runner = runner or Runner()
     ready: list[Extracted] = []  # stored ones, given out before the next computed one
 
@@ -219,7 +220,9 @@ def keyframe_features(
                     continue
             yield BurstJob(burst, compute, layout, reuse)
 
-    for job, result in runner.map(compute_burst, jobs(), desc, progress):
+    todo = list(jobs()) if isinstance(bursts, Sized) else jobs()  # a list: the bar knows its total
+    total = len(todo) if isinstance(todo, list) else None
+    for job, result in runner.map(compute_burst, todo, desc, progress, total=total):
         yield from ready
         ready.clear()
         try:

@@ -95,6 +95,9 @@ class InputSource(ABC):
 
     time_ordered = False
     one_camera = False
+    #: its keyframe bursts hold their frames (a recording, read once in order), so they are made
+    #: one at a time; others read their frames when loaded, and are listed before the features stage
+    frames_held = False
     #: keypoints per image of a learned method whose spec sets no ``top_k`` (``None``: the
     #: method's own default, 4,000)
     keypoints: int | None = None
@@ -164,6 +167,8 @@ class InputSource(ABC):
         runner = runner or Runner()
         bursts = self.keyframe_bursts(method, lambda name, key: stored(layout, name, key) is not None, out)
         named = (burst for burst in bursts if safe_name(burst.name))  # names COLMAP can store
+        if not self.frames_held:  # bursts that read their frames when loaded: listed, so the bar has a total
+            named = list(named)
         compute = compute_for(spec, runner, extractor)
         done: dict[str, Features] = {}
         computed = 0
@@ -249,6 +254,7 @@ class RecordingInput(InputSource):
 
     time_ordered = True
     one_camera = True
+    frames_held = True
 
     def __init__(self, path: str | Path, options: RecordingOptions | None = None):
         super().__init__(path)
