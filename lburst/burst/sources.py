@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import re
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -220,6 +221,12 @@ class Recording:
             if not self.files:
                 raise BurstError(f"{self.path}: no frames ({', '.join(IMAGE_SUFFIXES + RAW_SUFFIXES)})")
             self.fps = float(options.fps or self.meta.get("fps") or DEFAULT_FPS)
+            if options.fps is None and "fps" not in self.meta:  # its times, in keyframes.json and the trajectory
+                warnings.warn(
+                    f'{self.path}: no frame rate (--fps, or "fps" in meta.json): its frames are timed at '
+                    f"{DEFAULT_FPS:g} fps",
+                    stacklevel=2,
+                )
             self.indices = self._file_indices()
             self.frame_count = self.indices[-1] + 1
         self.gain: float | None = None  # set by bursts() from the first burst of linear frames

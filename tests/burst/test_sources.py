@@ -256,3 +256,19 @@ def test_a_recording_that_fails_before_two_keyframes_still_writes_result_json(tm
     result = json.loads((tmp_path / "out" / "result.json").read_text())
     assert result["status"] == "source_failed" and result["registered"] == []
     assert "img_0.png" in result["error"] and "no model" in result["error"]
+
+
+def test_a_frame_folder_without_a_frame_rate_says_it_is_timed_at_30_fps(tmp_path):
+    import warnings
+
+    folder = _folder(tmp_path, range(6))
+    (folder / "meta.json").unlink()
+    options = RecordingOptions(burst=1, every=2, frame_folders=True)
+    with pytest.warns(UserWarning, match=r"frames: no frame rate \(--fps, or \"fps\" in meta.json\): .* at 30 fps"):
+        rec = open_recording(folder, options)
+    assert [k.time for k, _ in rec.bursts()] == pytest.approx([0, 2 / 30, 4 / 30])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # given a rate: no word
+        open_recording(folder, RecordingOptions(burst=1, every=2, fps=20, frame_folders=True))
+        (folder / "meta.json").write_text('{"fps": 10}')
+        open_recording(folder, options)
