@@ -142,6 +142,15 @@ def test_the_exit_codes_are_documented_in_help_and_readme():
         assert f"\n  {code} " in text and f"`{code}`" in section, code
 
 
+def test_the_quick_start_commands_run_as_written_after_pip_install():
+    from pathlib import Path
+
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    start = readme.index("```bash", readme.index("Your own bursts"))
+    lines = readme[start : readme.index("```", start + 3)].splitlines()[1:]
+    assert lines and all(line.startswith("lburst ") for line in lines), lines  # no .venv to activate first
+
+
 def test_a_bad_option_value_is_one_line(tmp_path):
     burst = tmp_path / "b0"
     save_burst(np.zeros((1, 32, 32, 3), np.uint8), burst)
