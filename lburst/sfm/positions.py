@@ -292,7 +292,7 @@ def prior_fit(
         distance = np.array([np.linalg.norm(centres[n] - prior[n]) for n in both])
         rms = float(np.sqrt(np.mean(distance**2)))
         data["model_to_priors"] = {"mean": float(distance.mean()), "rms": rms, "max": float(distance.max())}
-        if data["in_frame"] and rms > FAR_FROM_PRIORS * std:
+        if data["in_frame"] and rms > FAR_FROM_PRIORS * std and not data["aligned_after_mapping"]:
             notes.append(
                 f"the cameras lie {rms:.3g} m RMS from their positions, over {FAR_FROM_PRIORS:g} times the prior's "
                 f"standard deviation ({std:g} m): the model may be folded, or the positions wrong"

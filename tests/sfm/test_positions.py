@@ -207,3 +207,28 @@ def test_a_name_matching_no_image_is_refused_before_any_feature_is_computed(flig
             scene, "sift", tmp_path / "out", ReconstructOptions(progress=False, positions=tmp_path / "p.txt")
         )
     assert not (tmp_path / "out" / "features").exists() and not (tmp_path / "out" / "images").exists()
+
+
+def test_priors_held_too_tightly_still_place_the_model_and_say_so(flight, tmp_path):
+    """0.5 m of receiver noise held at 0.01 m: COLMAP's pose-prior alignment finds no inliers and
+    keeps its own frame (43 m from the priors); a similarity fitted to them puts the model there."""
+    from lburst.sfm import reconstruct_scene
+
+    scene, truth = flight
+    held = reconstruct_scene(
+        scene,
+        "sift,max_features=1500",
+        tmp_path / "tight",
+        ReconstructOptions(
+            progress=False,
+            single_camera=True,
+            extra={"max_num_trials": 2000},
+            positions=scene / "gnss.txt",
+            position_std=0.01,
+            num_threads=1,
+        ),
+    )
+    assert held.registered == held.names
+    assert centre_errors(held, truth).max() < 1.5
+    assert held.positions["aligned_after_mapping"] and held.positions["model_to_priors"]["rms"] < 1.0
+    assert "a similarity fitted to them put the model in their frame" in held.positions["notes"][-1]
