@@ -4,6 +4,7 @@ import json
 
 from lburst.bench.reconstruction import run_benchmark
 from lburst.methods import method_slug
+from lburst.methods.learned import results_key
 from lburst.sfm.metrics import aggregate, markdown_table, scene_metrics
 from lburst.sfm.result import ReconstructionResult
 
@@ -228,3 +229,17 @@ def test_a_second_protocol_reads_the_features_of_another_benchmark(tmp_path):
             assert np.all(data["scores"] == np.float32(0.123))
     assert report["options"]["features_from"] == str(tmp_path / "refined")
     assert first["rows"][0]["keypoints_per_image"] == report["rows"][0]["keypoints_per_image"]
+
+
+def test_benchmark_skips_a_finished_learned_run_whose_spec_got_the_scenes_keypoints(tmp_path):
+    from lburst.bench.reconstruction import KEY_FILE, run_key
+
+    scene = _textured_scene(tmp_path / "scene")
+    out = tmp_path / "bench" / method_slug(results_key("lburst")) / scene.name
+    done = ReconstructionResult(  # what reconstruct_scene saves for "lburst" on a scene: its 8,000 keypoints
+        str(scene), "lburst,top_k=8000", str(out), ["0", "1", "2"], ["0", "1"], metrics={"registered_pct": 42.0}
+    )
+    done.save()
+    (out / KEY_FILE).write_text(json.dumps(run_key(scene, {"num_threads": 1})))
+    row = run_benchmark([scene], ["lburst"], tmp_path / "bench", progress=False, num_threads=1)["rows"][0]
+    assert row["registered_pct"] == 42.0 and row["registered"] == 2  # taken as finished, not run again
