@@ -141,7 +141,8 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
                 evaluate(previous, reference if reference.is_file() else None)
             return {**row, **previous.metrics, "registered": len(previous.registered), "error": colmap_error(previous)}
     try:
-        result = reconstruct_scene(scene, spec, out, ReconstructOptions(**options))
+        # vision alone: a photo set's EXIF GPS (lund's) would otherwise be held as priors
+        result = reconstruct_scene(scene, spec, out, ReconstructOptions(**{"input_positions": False, **options}))
         with atomic_path(out / KEY_FILE) as tmp:
             tmp.write_text(json.dumps(key, indent=1))
     except ReconstructionError as err:
