@@ -6,7 +6,10 @@ import contextlib
 import hashlib
 import os
 import re
+import shutil
+import struct
 import tempfile
+import warnings
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -14,6 +17,7 @@ import cv2
 import numpy as np
 
 from lburst.errors import LBurstOSError, LBurstValueError
+from lburst.memory import check_memory
 
 
 def file_sha1(path: str | Path) -> str:
@@ -62,8 +66,6 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             raise
     finally:
         if tmp_path.is_dir():
-            import shutil
-
             shutil.rmtree(tmp_path, ignore_errors=True)
         elif tmp_path.exists():
             tmp_path.unlink()
@@ -87,8 +89,6 @@ def remove_stale_temporaries(path: str | Path) -> list[Path]:
             continue
         with contextlib.suppress(OSError):
             if os.path.isdir(found):
-                import shutil
-
                 shutil.rmtree(found)
             else:
                 os.unlink(found)
@@ -147,6 +147,60 @@ def opencv_path(path: str | Path) -> str:
     return text
 
 
+#: bytes per pixel that decoding an image holds at its peak: OpenCV's image (up to four 16-bit
+#: channels) and its RGB copy
+DECODE_BYTES_PER_PIXEL = 16
+#: bytes per pixel of a decoded frame kept in a burst (three channels, up to 16 bits)
+FRAME_BYTES_PER_PIXEL = 6
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def header_size(path: str | Path) -> tuple[int, int] | None:
+    """An image file's (width, height) from its header, without decoding it (a PNG's IHDR, else
+    PIL, which reads no further than the header); ``None`` when neither knows the file (OpenCV then
+    decides).  ``BurstError`` for an image that PIL refuses as a decompression bomb (over 179 M pixels)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(24)
+    except OSError:
+        return None
+    if head[:8] == _PNG_SIGNATURE and head[12:16] == b"IHDR":
+        width, height = struct.unpack(">II", head[16:24])
+        return int(width), int(height)
+    try:
+        from PIL import Image
+    except ImportError:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        try:
+            with Image.open(path) as image:
+                return image.size
+        except Image.DecompressionBombError as exc:  # PIL's message gives the pixels, not the size
+            pixels = re.search(r"\((\d+) pixels\)", str(exc))
+            many = f"{int(pixels.group(1)) / 1e6:.0f} million pixels" if pixels else "too many pixels"
+            raise BurstError(f"{path}: {many}, more than PIL reads (179 million); resize it") from None
+        except (OSError, ValueError, SyntaxError, EOFError, IndexError, struct.error):
+            return None
+
+
+def check_frames_memory(paths: Sequence[str | Path]) -> None:
+    """``BurstError`` before any decoding when the images ``paths`` of a burst (their header sizes,
+    :func:`header_size`), held together, with the decoding of one, would need more than half of the
+    machine's memory (a 600 kB PNG can hold 25000x25000 pixels)."""
+    sizes = [s for s in (header_size(p) for p in paths) if s is not None]
+    if not sizes:
+        return
+    largest = max(w * h for w, h in sizes)
+    need = sum(w * h for w, h in sizes) * FRAME_BYTES_PER_PIXEL + largest * DECODE_BYTES_PER_PIXEL
+    (w, h), first = sizes[0], Path(paths[0])
+    what = f"{first}: a {w}x{h} image" if len(paths) == 1 else f"{first.parent}: {len(paths)} frames of {w}x{h}"
+    try:
+        check_memory(need, what, "resize the images")
+    except ValueError as exc:
+        raise BurstError(str(exc)) from None
+
+
 def decode_file(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray | None:
     """The image in file ``path`` as OpenCV decodes it (BGR), or ``None`` if it cannot be decoded.
 
@@ -186,6 +240,7 @@ def read_image(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise BurstError(f"{path}: no such file")
+    check_frames_memory([path])
     image = decode_file(path)
     if image is None:
         raise BurstError(f"{path}: not a readable image (corrupt, truncated or unsupported format)")
@@ -251,11 +306,13 @@ def load_burst(source: str | Path | Sequence[str | Path], frames: slice | tuple[
         if not source:
             raise BurstError("empty list of frames")
         paths = [Path(p) for p in source]
+        check_frames_memory(paths)
         images = [read_image(p) for p in paths]
     else:
         path = Path(source)
         if path.is_dir():
             paths = burst_files(path)
+            check_frames_memory(paths)
             images = [read_image(p) for p in paths]
         elif path.suffix.lower() in VIDEO_SUFFIXES:
             if not path.is_file():
@@ -296,8 +353,6 @@ def save_burst(burst: np.ndarray, folder: str | Path, whole: bool = False) -> li
     that exists is complete (scenes count a burst as done when its folder exists)."""
     folder = Path(folder)
     if whole:
-        import shutil
-
         folder.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.", suffix=".tmp"))
         try:

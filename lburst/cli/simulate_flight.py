@@ -12,7 +12,7 @@ from lburst.cli.numbers import integer, real
 from lburst.errors import LBurstValueError
 from lburst.scenes import flight_gnss
 from lburst.scenes import flight_recording as recording
-from lburst.scenes.night_flight import NightFlightConfig, gnss_positions, make_night_flight
+from lburst.scenes.night_flight import NightFlightConfig, check_flight_memory, gnss_positions, make_night_flight
 from lburst.sfm.positions import DEFAULT_STD_M, POSITIONS_FILE, write_positions
 
 
@@ -184,6 +184,7 @@ def main(args: argparse.Namespace) -> int:
     if conflict:
         raise LBurstValueError(conflict)
     cfg = flight_config(args, width, height)
+    check_flight_memory(cfg)  # before any output is written
     if args.out is not None:
         ref = make_night_flight(args.out, cfg)
         write_positions(args.out / POSITIONS_FILE, gnss_positions(cfg, args.gnss_noise))

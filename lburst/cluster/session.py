@@ -10,13 +10,15 @@ tasks again elsewhere, so a killed worker costs its task's time, not the run.
 from __future__ import annotations
 
 import logging
+import os
 import socket
 from contextlib import contextmanager
 from typing import Any, Iterator
 
 from lburst.cluster.spec import ClusterSpec
-from lburst.errors import LBurstError
+from lburst.errors import LBurstError, LBurstValueError
 from lburst.extras import require
+from lburst.memory import GIB, memory_limit_bytes
 
 #: seconds to wait for a scheduler to answer (a remote cluster), or for a local cluster's workers
 CONNECT_TIMEOUT_S = 60
@@ -32,6 +34,33 @@ REACH_TIMEOUT_S = 5
 WORKER_ENVIRON = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
+#: resident memory of one local worker: the interpreter, torch, Dask, a network and one burst
+#: (0.5 GB measured for lburst-b5 on a 5x640x480 burst)
+WORKER_BYTES = GIB // 2
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def check_local_workers(workers: int) -> None:
+    """``ValueError`` for a local cluster of more workers than this machine has cores, or than half
+    of its memory holds (:data:`WORKER_BYTES` each): each worker runs one burst at a time on its own
+    core, so more only share the cores and multiply the memory (local:64 on 2 cores did not finish)."""
+    cores, limit = usable_cores(), memory_limit_bytes()
+    fits = cores if limit is None else max(1, min(cores, limit // WORKER_BYTES))
+    if workers > fits:
+        memory = "" if limit is None else f", half its memory {limit / GIB:.1f} GiB"
+        raise LBurstValueError(
+            f"--cluster local:{workers}: a local worker runs one burst at a time on a core of its own (about "
+            f"{WORKER_BYTES / GIB:.1f} GiB each), and this machine has {cores} cores{memory}: use local:{fits} or fewer"
+        )
+
+
 class ClusterError(LBurstError, RuntimeError):
     """The cluster failed the run: no scheduler at the address, a task that killed every
     worker that ran it, a lost connection; what finished is in the store."""
@@ -40,7 +69,10 @@ class ClusterError(LBurstError, RuntimeError):
 @contextmanager
 def open_cluster(spec: ClusterSpec) -> Iterator[Any]:
     """A ``distributed.Client`` of the cluster of ``spec``, closed (and a local cluster
-    stopped) when the block ends."""
+    stopped) when the block ends; a local cluster larger than the machine is refused first
+    (:func:`check_local_workers`)."""
+    if spec.local:
+        check_local_workers(spec.workers)
     distributed = require("distributed", "--cluster")
     dask = require("dask", "--cluster")
     cluster = None

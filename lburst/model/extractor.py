@@ -12,7 +12,6 @@ a level resized to ``w x h`` back as ``x * W / w``, which is off by
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
@@ -24,6 +23,7 @@ import torch.nn.functional as F
 from lburst.burst.align import align_burst, check_warp
 from lburst.errors import LBurstValueError
 from lburst.features import Features, concatenate, image_size, select
+from lburst.memory import memory_limit_bytes
 from lburst.model.fast import FastLBurstNet, descriptor_stride, descriptors_at
 from lburst.model.lite import LiteNet
 from lburst.model.network import (
@@ -314,14 +314,6 @@ def burst_from_tensor(x: torch.Tensor) -> np.ndarray:
 def as_burst(burst) -> np.ndarray:
     """``burst`` as a NumPy array: a torch tensor through :func:`burst_from_tensor`."""
     return burst_from_tensor(burst) if isinstance(burst, torch.Tensor) else np.asarray(burst)
-
-
-def memory_limit_bytes() -> int | None:
-    """Half of the machine's physical memory (``None`` where the OS does not say)."""
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 class LBurst:

@@ -28,6 +28,7 @@ import pickle
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
@@ -36,6 +37,7 @@ from torch import nn
 
 from lburst.burst.io import atomic_path
 from lburst.errors import LBurstValueError
+from lburst.memory import check_memory, gib
 from lburst.model.lite import LITE_NAME, LiteConfig, LiteNet
 from lburst.model.precision import (  # noqa: F401  (re-exported)
     AUTOCAST_DTYPES,
@@ -261,15 +263,76 @@ def default_pad(meta: dict | None) -> int:
     return check_pad((meta or {}).get("pad", 0), "the weights' pad")
 
 
+#: pixels of the largest pyramid level at extraction (``MultiScaleConfig.max_size`` 1024, 4:3): a
+#: network holds the maps of one level beside its weights
+LEVEL_PIXELS = 1024 * 768
+
+
+def weight_bytes(build: Callable[[], nn.Module]) -> int:
+    """Bytes of the weights (and buffers) of the network ``build()`` makes, from shapes alone: it
+    is built on PyTorch's ``meta`` device, which allocates nothing (a light network of
+    ``dim=2000000000`` asked for 768 GB)."""
+    with torch.device("meta"):
+        net = build()
+    return sum(t.numel() * t.element_size() for t in (*net.parameters(), *net.buffers()))
+
+
+def map_bytes_per_pixel(net: nn.Module, channels: int, side: int = 32) -> float:
+    """Bytes per input pixel of ``net``'s largest layer output and that layer's input (float32),
+    from one forward pass of a ``side x side`` zero input in eval mode (its state unchanged)."""
+    largest = 0
+
+    def count(_module, _inputs, output) -> None:
+        nonlocal largest
+        values = output.values() if isinstance(output, dict) else output
+        values = [values] if torch.is_tensor(values) else values
+        largest = max(largest, sum(v.numel() for v in values if torch.is_tensor(v)))
+
+    leaves = [m for m in net.modules() if not any(True for _ in m.children())]
+    hooks = [m.register_forward_hook(count) for m in leaves]
+    training = net.training
+    try:
+        with torch.no_grad():
+            net.eval()(torch.zeros(1, channels, side, side))
+    finally:
+        net.train(training)
+        for hook in hooks:
+            hook.remove()
+    return 2 * 4 * largest / side**2
+
+
+def checked_network(build: Callable[[], nn.Module], channels: int, what: str, lower: str) -> nn.Module:
+    """``build()``, refused with ``ValueError`` naming ``what``, the figure and ``lower`` (what makes
+    it smaller) when its weights (:func:`weight_bytes`, before it is built) or its weights with the
+    maps of a :data:`LEVEL_PIXELS` pyramid level (:func:`map_bytes_per_pixel`) would need more than
+    half of the machine's memory."""
+    weights = weight_bytes(build)
+    check_memory(weights, f"{what} (its weights alone)", lower)
+    net = build()
+    need = weights + map_bytes_per_pixel(net, channels) * LEVEL_PIXELS
+    check_memory(need, f"{what} on a 1024x768 input (its weights {gib(weights)})", lower)
+    return net
+
+
+#: what makes a light network smaller (its net string's fields)
+LITE_SMALLER = "a smaller network (lower dim, fine or coarse)"
+
+
 def network_from_net_string(net: str) -> LBurstNet | LiteNet:
     """An untrained network of the architecture a checkpoint's ``net`` string names:
-    the Fast-Quad-L2-Net (published layout) or the light network (:mod:`lburst.model.lite`)."""
+    the Fast-Quad-L2-Net (published layout) or the light network (:mod:`lburst.model.lite`),
+    refused before it is built when it would not fit in memory (:func:`checked_network`)."""
     if isinstance(net, str) and net.startswith(LITE_NAME):
         try:
-            return LiteNet(LiteConfig.from_net_string(net))
+            lite = LiteConfig.from_net_string(net)
+            return checked_network(lambda: LiteNet(lite), lite.in_channels, net, LITE_SMALLER)
         except ValueError as exc:
             raise CheckpointError(str(exc)) from exc
-    return LBurstNet(config_from_net_string(net))
+    config = config_from_net_string(net)
+    try:
+        return checked_network(lambda: LBurstNet(config), config.in_channels, net, "fewer burst frames (inchan)")
+    except ValueError as exc:
+        raise CheckpointError(str(exc)) from exc
 
 
 def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tuple[LBurstNet | LiteNet, dict]:

@@ -41,6 +41,7 @@ from scipy.spatial.transform import Rotation
 
 from lburst.burst.io import atomic_path, save_burst
 from lburst.errors import LBurstValueError
+from lburst.memory import check_memory, gib
 from lburst.noise import noise_from_spec
 from lburst.numbers import check_integer, check_real
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
@@ -51,6 +52,15 @@ CONFIG_FILE = "night_flight.json"
 SURVEY_FILE = "survey.json"
 SURVEY_FIELDS = ("survey_lines", "line_length", "line_spacing")
 Noise = Callable[[np.ndarray, np.random.Generator], np.ndarray]
+#: bytes per texel of the ground texture that building the city holds at its peak: 55 measured
+#: (peak resident memory of make_city, 447 MiB for the default flight's 8.5 M texels, 1105 MiB for
+#: 40 bursts' 22 M)
+CITY_BYTES_PER_TEXEL = 56
+#: bytes per rendered pixel (``width * height * supersample**2``) at the peak of rendering one
+#: frame (rays, hits, shading): 185 measured (tracemalloc, 1600x1200 and 800x600 at supersample 2)
+RENDER_BYTES_PER_PIXEL = 192
+#: bursts whose views estimate the ground a flight sees (:func:`flight_bytes`)
+SAMPLED_BURSTS = 256
 
 
 @dataclass(frozen=True)
@@ -275,8 +285,8 @@ def gnss_positions(cfg: NightFlightConfig, std: float) -> dict[str, np.ndarray]:
     return {name: -R.T @ t + rng.normal(0.0, std, 3) for name, (R, t) in reference(cfg).poses.items()}
 
 
-def ground_bounds(cfg: NightFlightConfig, margin: float = 10.0) -> np.ndarray:
-    """(2, 2) ``[[x0, y0], [x1, y1]]`` covering the ground seen by every frame."""
+def ground_bounds(cfg: NightFlightConfig, margin: float = 10.0, bursts: Sequence[int] | None = None) -> np.ndarray:
+    """(2, 2) ``[[x0, y0], [x1, y1]]`` covering the ground seen by every frame (of ``bursts``, default all)."""
     K = intrinsics(cfg.width, cfg.height, cfg.hfov_deg)
     w, h = cfg.width, cfg.height
     xs, ys = np.linspace(0, w, 33), np.linspace(0, h, 25)
@@ -289,7 +299,7 @@ def ground_bounds(cfg: NightFlightConfig, margin: float = 10.0) -> np.ndarray:
         ]
     )
     pts = []
-    for i in range(cfg.n_bursts):
+    for i in range(cfg.n_bursts) if bursts is None else bursts:
         for k in (0, cfg.frames_per_burst - 1):
             R, t = camera_pose(cfg, frame_time(cfg, i, k))
             border = rays_through(K, R, uv)
@@ -300,8 +310,39 @@ def ground_bounds(cfg: NightFlightConfig, margin: float = 10.0) -> np.ndarray:
     return np.stack([pts.min(0) - margin, pts.max(0) + margin])
 
 
+def flight_bytes(cfg: NightFlightConfig) -> tuple[float, float, float]:
+    """Estimated peak memory of the flight's city (bytes, from the ground it sees: the views of
+    at most :data:`SAMPLED_BURSTS` bursts spread along the path, which cost milliseconds where all
+    of a long survey's would cost minutes), of rendering one frame (bytes), and the ground's area (m^2)."""
+    sample = np.unique(np.linspace(0, cfg.n_bursts - 1, min(cfg.n_bursts, SAMPLED_BURSTS)).round().astype(int))
+    (x0, y0), (x1, y1) = ground_bounds(cfg, bursts=sample)
+    area = float((x1 - x0) * (y1 - y0))
+    texels = area / cfg.city.ground_texel**2
+    return (
+        texels * CITY_BYTES_PER_TEXEL,
+        float(cfg.width * cfg.height) * cfg.supersample**2 * RENDER_BYTES_PER_PIXEL,
+        area,
+    )
+
+
+def check_flight_memory(cfg: NightFlightConfig) -> None:
+    """``ValueError`` with the figure and what lowers it when the city and the rendering of one
+    frame (:func:`flight_bytes`) would need more than half of the machine's memory."""
+    city, frame, area = flight_bytes(cfg)
+    if city >= frame:
+        what = f"the city under this flight ({area / 1e6:.3g} km^2 of ground in view) with a frame's rendering"
+        lower = "fly a shorter path (--bursts, --spacing; --survey, --line-length, --line-spacing)"
+    else:
+        pixels = f"{cfg.width}x{cfg.height}" + (f" x{cfg.supersample} supersampled" if cfg.supersample > 1 else "")
+        what = f"rendering a {pixels} frame (with the city, {gib(city)})"
+        lower = "render smaller frames (--size, --supersample)"
+    check_memory(city + frame, what, lower)
+
+
 def make_city(cfg: NightFlightConfig) -> City:
-    """The flight's city: random from ``cfg.seed``, styled by ``cfg.city``, covering the ground in view."""
+    """The flight's city: random from ``cfg.seed``, styled by ``cfg.city``, covering the ground in
+    view; ``ValueError`` first when it and a frame's rendering would not fit (:func:`check_flight_memory`)."""
+    check_flight_memory(cfg)
     return build_city(ground_bounds(cfg), cfg.city, np.random.default_rng([cfg.seed, 0]))
 
 
@@ -395,6 +436,7 @@ def make_night_flight(
     Bursts already in ``out_dir`` are kept (resume); a folder made with another
     configuration is refused with ``ValueError``.
     """
+    check_flight_memory(cfg)  # before the folder is made
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     config_path = out / CONFIG_FILE

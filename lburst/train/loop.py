@@ -30,12 +30,14 @@ from lburst.errors import LBurstFileExistsError, LBurstValueError
 from lburst.extras import MissingExtra
 from lburst.model.lite import LITE_NAME, LiteConfig, LiteNet
 from lburst.model.network import (
+    LITE_SMALLER,
     CheckpointError,
     LBurstNet,
     NetConfig,
     autocast_dtype,
     check_device,
     check_precision,
+    checked_network,
     checkpoint_dict,
     load_checkpoint,
     replicate_frames,
@@ -256,7 +258,8 @@ def build_network(arch: str, frames: int) -> torch.nn.Module:
     if arch == "lite":
         return LiteNet(LiteConfig(frames=frames))
     if arch.startswith(LITE_NAME):
-        return LiteNet(replace(LiteConfig.from_net_string(arch), frames=frames))
+        lite = replace(LiteConfig.from_net_string(arch), frames=frames)
+        return checked_network(lambda: LiteNet(lite), lite.in_channels, f"--arch {arch!r}", LITE_SMALLER)
     raise LBurstValueError(f"unknown architecture {arch!r}: use {', '.join(ARCHS)} or an {LITE_NAME}(...) string")
 
 
