@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import os
 import re
@@ -72,8 +73,32 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
 
 def _naming(exc: OSError, path: Path) -> OSError:
-    """``exc`` again, naming ``path`` (the file being written) instead of a temporary name."""
+    """``exc`` again, naming ``path`` (the file being written) instead of a temporary name, and
+    for a full disk the disk (:func:`disk_full`)."""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return disk_full(path, exc.errno)
     return OSError(exc.errno, exc.strerror or str(exc), os.fspath(path))
+
+
+def disk_full(path: str | Path, code: int = errno.ENOSPC) -> LBurstOSError:
+    """The error of a write of ``path`` that found its disk full (or its quota spent), naming the
+    file, the disk (its mount point) and the space left there: ``PATH: No space left on device:
+    the disk mounted at /data has 0.1 MiB free; free some space there, or write elsewhere``."""
+    folder = Path(os.path.abspath(path)).parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    mount = folder
+    while not os.path.ismount(mount) and mount != mount.parent:
+        mount = mount.parent
+    try:
+        free = f"has {shutil.disk_usage(folder).free / 2**20:.1f} MiB free"
+    except OSError:
+        free = "is full"
+    return LBurstOSError(
+        code,
+        f"{os.strerror(code)}: the disk mounted at {mount} {free}; free some space there, or write elsewhere",
+        os.fspath(path),
+    )
 
 
 def remove_stale_temporaries(path: str | Path) -> list[Path]:
@@ -232,7 +257,13 @@ def write_image(path: str | Path, rgb: np.ndarray) -> None:
     ok, data = cv2.imencode(path.suffix or ".png", image)
     if not ok:
         raise LBurstOSError(f"{path}: could not encode a {rgb.dtype} {rgb.shape} image as {path.suffix or '.png'}")
-    data.tofile(path)
+    try:
+        with open(path, "wb") as f:  # NumPy's tofile said only '40229 requested and 28672 written' on a full disk
+            f.write(data)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            path.unlink()  # what was written of it
+        raise _naming(exc, path) from None
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -435,16 +466,29 @@ def read_features_npz(path: str | Path) -> dict[str, np.ndarray]:
     return out
 
 
+@contextlib.contextmanager
+def h5_file(path: str | Path, mode: str = "a") -> Iterator:
+    """An ``h5py.File`` for writing ``path``: ``mode`` ``'w'`` a new file, ``'a'`` the file there
+    (a new one where there is none, or an empty one).  It is written through a Python file object
+    (h5py's ``fileobj`` driver), so that a failed write (a full disk) is the ``OSError`` it is:
+    HDF5's own driver (HDF5 2.0) crashed the process (a segmentation fault) closing a file after one."""
+    import h5py
+
+    path = Path(path)
+    new = mode == "w" or not path.exists() or path.stat().st_size == 0
+    with open(path, "w+b" if new else "r+b") as raw, h5py.File(raw, "w" if new else "r+") as f:
+        yield f
+
+
 def write_features_h5(
     path: str | Path, name: str, features: dict[str, np.ndarray], image_size: tuple[int, int] | None = None
 ) -> None:
     """Add or replace group ``name`` in an hloc-style ``features.h5``: ``keypoints`` (K, 2)
     float32 (pixel centres at integer coordinates, as hloc; COLMAP adds 0.5),
-    ``descriptors`` (D, K), ``scores`` (K,), ``image_size`` (W, H) (by default the features' own)."""
-    import h5py
-
+    ``descriptors`` (D, K), ``scores`` (K,), ``image_size`` (W, H) (by default the features' own);
+    written by :func:`h5_file`."""
     image_size = features_image_size(features, image_size)
-    with h5py.File(path, "a") as f:
+    with h5_file(path, "a") as f:
         if name in f:
             del f[name]
         group = f.create_group(name)

@@ -35,6 +35,7 @@ from lburst.burst.io import (
     BurstError,
     atomic_path,
     check_output_outside,
+    h5_file,
     read_features_npz,
     write_features_h5,
 )
@@ -162,10 +163,9 @@ def this_cut(folder: Path) -> set[str] | None:
 
 def write_h5(path: Path, finished: list[tuple[str, Path]]) -> None:
     """hloc's ``features.h5`` from finished ``.npz`` files (group name, file), atomically."""
-    import h5py
-
     with atomic_path(path) as tmp:
-        h5py.File(tmp, "w").close()  # a new, empty file (h5py appends to an existing one), even when none finished
+        with h5_file(tmp, "w"):
+            pass  # a new, empty file (h5py appends to an existing one), even when none finished
         for group, npz in finished:
             features = read_features_npz(npz)
             write_features_h5(tmp, group, features, tuple(int(v) for v in features["imsize"]))

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lburst.burst.io import atomic_path, to_uint8, write_features_h5, write_image
+from lburst.burst.io import atomic_path, h5_file, to_uint8, write_features_h5, write_image
 from lburst.matching import similarity
 from lburst.sfm.metrics import markdown_table
 from lburst.sfm.poses import umeyama
@@ -118,14 +118,12 @@ def write_hloc(
     atomically; each image's size is its features' ``image_size`` (W, H).  ``scores[p]`` (M_p,):
     the scores of pair ``p``'s matches; ``None``: the similarity of the matched descriptors
     (:func:`lburst.matching.similarity`)."""
-    import h5py
-
     files = [f"{n}.png" for n in names]
     with atomic_path(out / "features.h5") as tmp:
         tmp.unlink()  # h5py appends to an existing file; start from none
         for file, feats in zip(files, features):
             write_features_h5(tmp, file, feats)
-    with atomic_path(out / "matches.h5") as tmp, h5py.File(tmp, "w") as f:
+    with atomic_path(out / "matches.h5") as tmp, h5_file(tmp, "w") as f:
         for p, ((a, b), m) in enumerate(zip(pairs, matches)):
             m0 = np.full(len(features[a]["keypoints"]), -1, np.int32)
             m0[m[:, 0]] = m[:, 1]
