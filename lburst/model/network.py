@@ -369,14 +369,22 @@ def load_checkpoint(path: str | Path, device: torch.device | str = "cpu") -> tup
         net.load_state_dict(state, strict=True)
     except RuntimeError as exc:
         raise CheckpointError(f"{path}: weights do not fit {ckpt['net']}: {exc}") from exc
-    broken = [k for k, v in net.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()]
+    check_finite_weights(
+        path, [k for k, v in net.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()]
+    )
+    net.eval().to(device)
+    extra = {k: v for k, v in ckpt.items() if k != "state_dict"}
+    return net, extra
+
+
+def check_finite_weights(path: str | Path, broken: list[str]) -> None:
+    """:class:`CheckpointError` naming ``path`` when weight tensors (the names ``broken``) hold NaN
+    or inf: such a network gives no keypoint at all, silently.  Every model lburst loads is checked
+    (a checkpoint, an ONNX export, an OpenVINO model)."""
     if broken:
         raise CheckpointError(
             f"{path}: {len(broken)} weight tensors hold NaN or inf (a diverged run?), first {broken[0]!r}"
         )
-    net.eval().to(device)
-    extra = {k: v for k, v in ckpt.items() if k != "state_dict"}
-    return net, extra
 
 
 def replicate_frames(net: LBurstNet, frames: int) -> LBurstNet:

@@ -34,6 +34,7 @@ from lburst.model.network import (
     WHITENING_KEYS,
     CheckpointError,
     LBurstNet,
+    check_finite_weights,
     check_pad,
     default_pad,
     load_checkpoint,
@@ -143,6 +144,29 @@ def parse_meta(props: dict[str, str], path: str | Path) -> dict:
         raise CheckpointError(f"{path}: unreadable lburst metadata ({exc})") from exc
 
 
+def nonfinite_initializers(path: str | Path) -> list[str]:
+    """Names of the floating-point weights (initializers and constants) of the ONNX graph at
+    ``path`` that hold NaN or inf."""
+    onnx = require("onnx", "checking an ONNX model's weights")
+    from onnx import numpy_helper
+
+    graph = onnx.load(str(path)).graph
+    tensors = [(t.name, t) for t in graph.initializer]
+    tensors += [
+        (node.output[0] if node.output else node.name, a.t)
+        for node in graph.node
+        if node.op_type == "Constant"
+        for a in node.attribute
+        if a.name == "value"
+    ]
+    broken = []
+    for name, tensor in tensors:
+        values = numpy_helper.to_array(tensor)
+        if np.issubdtype(values.dtype, np.floating) and not np.isfinite(values).all():
+            broken.append(name)
+    return broken
+
+
 class OnnxRunner:
     """An ONNX Runtime session with the interface of :meth:`FastLBurstNet.forward`."""
 
@@ -169,6 +193,7 @@ class OnnxRunner:
         channels = self.session.get_inputs()[0].shape[1]
         if not isinstance(channels, int) or channels % 3:
             raise CheckpointError(f"{path}: input has {channels} channels, not 3N")
+        check_finite_weights(path, nonfinite_initializers(path))
         self.frames = channels // 3
         self.meta = parse_meta(self.session.get_modelmeta().custom_metadata_map, path)
 

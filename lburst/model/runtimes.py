@@ -58,6 +58,7 @@ from lburst.model.lite import LiteNet
 from lburst.model.network import (
     CheckpointError,
     LBurstNet,
+    check_finite_weights,
     normalize_burst,
 )
 from lburst.model.onnx import (
@@ -218,6 +219,15 @@ def openvino_model(source: str | Path | LBurstNet | LiteNet, meta: dict | None =
     return model
 
 
+def nonfinite_constants(model) -> list[str]:
+    """Names of the floating-point constants (the weights) of an ``openvino.Model`` that hold NaN or inf."""
+    return [
+        op.get_friendly_name()
+        for op in model.get_ordered_ops()
+        if op.get_type_name() == "Constant" and op.get_element_type().is_real() and not np.isfinite(op.get_data()).all()
+    ]
+
+
 def _model_props(model) -> dict[str, str]:
     """The ``lburst.*`` entries of an ``openvino.Model``'s ``rt_info['framework']`` (where ONNX
     ``metadata_props`` land, and where :func:`openvino_model` puts a checkpoint's ``meta``)."""
@@ -277,6 +287,7 @@ class OpenVinoRunner:
         channels = model.inputs[0].get_partial_shape()[1]
         if channels.is_dynamic or channels.get_length() % 3:
             raise CheckpointError(f"{where}: input has {channels} channels, not 3N")
+        check_finite_weights(where, nonfinite_constants(model))
         self.frames = channels.get_length() // 3
         self.meta = parse_meta(_model_props(model), where)
         names = [o.get_names() for o in model.outputs]  # by name where it has them, else in order
