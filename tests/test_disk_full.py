@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import lburst.burst.io as burst_io
+from lburst import store
 from lburst.burst.io import atomic_path, h5_file, save_burst, write_features_h5, write_image
 from lburst.cli import error_line, main
 
@@ -84,6 +85,14 @@ def test_an_image_on_a_full_disk_names_the_disk_and_leaves_no_part(tmp_path, dis
     with pytest.raises(OSError) as err:
         save_burst(image[None], tmp_path / "burst")
     assert error_line(err.value).startswith(f"{tmp_path / 'burst' / 'frame_000.png'}: {DISK_FULL}")
+
+
+def test_a_features_npz_on_a_full_disk_names_the_disk_and_leaves_nothing(tmp_path, disk_holds):
+    disk_holds(20_000)
+    with pytest.raises(OSError) as err:
+        store.save(tmp_path / "b0.npz", _features(), None, key={"method": "m", "source": "s"})
+    assert error_line(err.value).startswith(f"{tmp_path / 'b0.npz'}: {DISK_FULL}")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_the_disk_named_is_the_mount_point_holding_the_file(tmp_path):
