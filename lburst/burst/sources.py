@@ -239,6 +239,13 @@ class Recording:
             return self.bag.camera()
         return self.meta.get("camera")
 
+    @property
+    def camera_source(self) -> str:
+        """Where :attr:`camera` comes from, as the report says it."""
+        if self.bag is not None and "camera" not in self.meta:
+            return f"the CameraInfo of {self.bag.path.name}"
+        return "meta.json"
+
     def _bag_rate(self) -> float:
         """A bag's frame rate: its frames over the time from the first to the last (30 for one frame)."""
         span = self.bag.span()

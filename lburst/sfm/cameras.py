@@ -111,7 +111,7 @@ def camera_plan(scene: Scene, sizes: list[tuple[int, int]], options: Reconstruct
 def camera_origin(scene: Scene, plan: CameraPlan, options: ReconstructOptions) -> str:
     """Where a recording's intrinsics came from, in words (``result.json``'s ``metrics.camera``, ``report.md``)."""
     if plan.calibrated:
-        return "meta.json, held fixed"
+        return f"{scene.camera_source}, held fixed"
     if plan.fixed:
         return f"default prior held fixed ({'no meta.json camera' if scene.camera is None else '--camera'})"
     if scene.camera is None:

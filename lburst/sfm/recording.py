@@ -89,4 +89,4 @@ def keyframe_scene(recording: Recording, keyframes: list[Keyframe], out: Path) -
             )
             reference_path = out / "reference.json"
             reference.save(reference_path)
-    return Scene(recording.path, items, reference_path, camera=recording.camera)
+    return Scene(recording.path, items, reference_path, camera=recording.camera, camera_source=recording.camera_source)

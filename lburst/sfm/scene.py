@@ -43,12 +43,14 @@ class SceneItem:
 @dataclass(frozen=True)
 class Scene:
     """The items of a scene in trajectory order, its optional reference file, and the camera
-    of a recording's ``meta.json`` (a COLMAP camera dict used as the intrinsics prior), if any."""
+    of a recording's ``meta.json`` or bag (a COLMAP camera dict used as the intrinsics prior),
+    if any, with where it came from (``camera_source``, as the report says it)."""
 
     root: Path
     items: tuple[SceneItem, ...]
     reference_path: Path | None
     camera: dict | None = None
+    camera_source: str = "meta.json"
 
     @property
     def names(self) -> list[str]:

@@ -45,6 +45,7 @@ def test_a_bag_is_a_recording_of_its_frames_camera_and_fixes(tmp_path, name, sto
     np.testing.assert_array_equal(bursts[1][1][1], frame(2))  # the keyframe is the burst's middle frame
     np.testing.assert_array_equal(bursts[1][1][0], frame(1))
     assert rec.camera == CAMERA | {"model": "OPENCV"} and rec.fps == pytest.approx(20.0, rel=0.05)
+    assert rec.camera_source == f"the CameraInfo of {path.name}"  # as the report names the camera
     track = rec.gnss_track()
     assert [f.time for f in track.fixes] == pytest.approx([0.01, 0.11, 0.21])
     assert [f.alt for f in track.fixes] == [400.0, 402.0, 404.0] and "/gps/fix (NavSatFix, 3 fixes)" in track.source
@@ -155,7 +156,7 @@ def test_an_uncalibrated_camera_info_is_refused_unless_a_meta_json_says_what_to_
     ):
         open_recording(path).camera
     (tmp_path / "u.meta.json").write_text(json.dumps({"camera": None}))
-    assert open_recording(path).camera is None
+    assert open_recording(path).camera is None and open_recording(path).camera_source == "meta.json"
 
 
 def test_fixes_without_a_fix_are_left_out_with_a_note(tmp_path):
