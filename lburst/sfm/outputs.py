@@ -19,6 +19,10 @@ same files in the output folder ``OUT``:
   keypoints, -1: unmatched) and ``matching_scores0`` (K0,) float16, the matcher's score of
   each match (:meth:`lburst.matching.DescriptorMatcher.match`: the similarity of the two
   descriptors in [-1, 1]; 0: unmatched);
+- with position priors from GNSS that placed the model (:mod:`lburst.sfm.positions`):
+  ``model.las`` and ``cameras.geojson`` in the fixes' UTM zone and WGS 84
+  (:mod:`lburst.geo.outputs`), the model and ``trajectory.tum`` in metres east, north and up
+  of the first fix;
 - ``report.md`` with ``trajectory.png`` (top-down, Sim3-aligned to the ground truth
   when there is one) and ``registration.png`` (3D points per image; grey: not
   registered), the 3D points the first and last images share (a closed loop ties them),
