@@ -4,8 +4,8 @@ frame folder ``X/``), checked where it is read: a JSON object with, each optiona
 - ``fps``: the frame rate of a frame folder (``null``: not given), a number from :data:`MIN_FPS` to :data:`MAX_FPS`
   (the bounds of ``--fps`` too: :func:`check_fps`);
 - ``camera``: a COLMAP camera dict (``model``, ``width``, ``height``, ``params``), checked as
-  :func:`lburst.sfm.colmap.check_camera` checks a camera before COLMAP sees it, where pycolmap
-  is installed (without it no camera reaches COLMAP).
+  :func:`lburst.camera_dict.check_camera` checks a camera before COLMAP sees it (its model and
+  parameter count where pycolmap is installed: without it no camera reaches COLMAP).
 
 Other keys are kept as they are (the simulated flight writes ``kind``, ``frames`` and its
 configuration).  Every problem is a :class:`lburst.burst.io.BurstError` naming the file and the field.
@@ -13,12 +13,13 @@ configuration).  Every problem is a :class:`lburst.burst.io.BurstError` naming t
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 from typing import Any
 
 from lburst.burst.io import BurstError
+from lburst.camera_dict import check_camera
+from lburst.extras import MissingExtra
 from lburst.numbers import check_real
 
 #: frames per second: the slowest frame rate lburst takes (a frame every 2.8 hours, a time-lapse);
@@ -79,12 +80,10 @@ def check_meta_camera(camera: Any, path: str | Path) -> None:
             f"{path}: camera must be a JSON object (a COLMAP camera: model, width, height, params), "
             f"got a {_json_type(camera)}"
         )
-    if importlib.util.find_spec("pycolmap") is None:
-        return  # no reconstruction without it, so the camera reaches nothing that could fail
-    from lburst.sfm.colmap import check_camera
-
     try:
         check_camera(camera)
+    except MissingExtra:
+        return  # the model needs pycolmap to be checked, and no reconstruction runs without it
     except ValueError as err:
         raise BurstError(f"{path}: camera: {err}") from None
 

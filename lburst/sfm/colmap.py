@@ -38,8 +38,9 @@ from typing import Callable, ContextManager, Iterator
 
 import numpy as np
 
+from lburst.camera_dict import check_camera  # noqa: F401  (re-exported: lburst.sfm.cameras, tests)
 from lburst.errors import LBurstError, LBurstValueError
-from lburst.extras import MissingExtra, pycolmap  # imported on first use, after cv2 (see the module docstring)
+from lburst.extras import pycolmap  # imported on first use, after cv2 (see the module docstring)
 from lburst.numbers import check_integer
 from lburst.process import folder_lock
 from lburst.sfm.join import join_models
@@ -673,29 +674,3 @@ def failure_summary(log: str, lines: int = 8) -> str:
             return text if not following or following.startswith("***") else f"{text} {following}"
     errors = [row for row in rows if re.match(r"^[A-Za-z_.]*(Error|Exception)\b", row)]
     return errors[-1] if errors else "\n".join(rows[-lines:])
-
-
-def check_camera(camera: dict) -> None:
-    """``ValueError`` for a camera dict COLMAP would abort on: unknown model, bad size, or a
-    parameter count other than the model's."""
-    try:
-        model, width, height, params = camera["model"], camera["width"], camera["height"], camera["params"]
-    except (KeyError, TypeError) as err:
-        raise LBurstValueError(f"a camera needs model, width, height and params (lacks {err})") from None
-    if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (width, height)):
-        raise LBurstValueError(f"width and height must be positive integers, got {width!r} x {height!r}")
-    try:
-        expected = len(pycolmap.Camera.create_from_model_name(0, str(model), 1.0, width, height).params)
-    except MissingExtra:
-        raise  # no pycolmap: the extra to install, not an unknown model
-    except Exception:
-        raise LBurstValueError(f"unknown camera model {model!r}") from None
-    values = np.asarray(params, dtype=object)
-    if values.ndim != 1 or not all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values
-    ):
-        raise LBurstValueError(f"params must be a list of finite numbers, got {params!r}")
-    if len(values) != expected:
-        raise LBurstValueError(f"{model} takes {expected} params, got {len(values)}")
-    if values[0] <= 0:
-        raise LBurstValueError(f"the focal length must be positive, got {values[0]}")

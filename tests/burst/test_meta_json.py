@@ -93,3 +93,20 @@ def test_the_fps_option_and_meta_json_share_their_bounds(capsys):
     except SystemExit as exc:  # argparse's own exit
         code = exc.code
     assert code == 2 and "--fps: must be a number >= 0.0001 and <= 10000" in capsys.readouterr().err
+
+
+def test_without_pycolmap_the_camera_is_checked_but_for_its_model(tmp_path, monkeypatch):
+    """extract needs no sfm extra: a camera is still checked for what needs no COLMAP model."""
+    import lburst.camera_dict
+    from lburst.extras import MissingExtra
+
+    class NoPycolmap:
+        def __getattr__(self, name):
+            raise MissingExtra("checking a camera model needs pycolmap: pip install 'lburst[sfm]'")
+
+    monkeypatch.setattr(lburst.camera_dict, "pycolmap", NoPycolmap())
+    folder = _folder(tmp_path, json.dumps({"fps": 10, "camera": {**CAMERA, "model": "SOME_MODEL"}}))
+    assert open_recording(folder).camera["model"] == "SOME_MODEL"
+    (folder / "meta.json").write_text(json.dumps({"fps": 10, "camera": {**CAMERA, "width": "abc"}}))
+    with pytest.raises(BurstError, match="meta.json: camera: width and height must be positive integers"):
+        open_recording(folder)
