@@ -15,10 +15,11 @@ import socket
 from contextlib import contextmanager
 from typing import Any, Iterator
 
+from lburst import memory as machine_memory
 from lburst.cluster.spec import ClusterSpec
 from lburst.errors import LBurstError, LBurstValueError
 from lburst.extras import require
-from lburst.memory import GIB, memory_limit_bytes
+from lburst.memory import GIB
 
 #: seconds to wait for a scheduler to answer (a remote cluster), or for a local cluster's workers
 CONNECT_TIMEOUT_S = 60
@@ -51,7 +52,7 @@ def check_local_workers(workers: int) -> None:
     """``ValueError`` for a local cluster of more workers than this machine has cores, or than half
     of its memory holds (:data:`WORKER_BYTES` each): each worker runs one burst at a time on its own
     core, so more only share the cores and multiply the memory (local:64 on 2 cores did not finish)."""
-    cores, limit = usable_cores(), memory_limit_bytes()
+    cores, limit = usable_cores(), machine_memory.memory_limit_bytes()
     fits = cores if limit is None else max(1, min(cores, limit // WORKER_BYTES))
     if workers > fits:
         memory = "" if limit is None else f", half its memory {limit / GIB:.1f} GiB"
