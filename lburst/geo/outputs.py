@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lburst.extras import require
+from lburst.extras import pycolmap, require
 from lburst.geo.frame import GeoOrigin
 
 LAS_FILE = "model.las"
@@ -80,8 +80,6 @@ def write_cameras_geojson(
 def write_georeferenced(out: Path, origin: GeoOrigin, model_dir: Path, poses: dict[str, tuple]) -> dict:
     """``OUT/model.las`` from the COLMAP model in ``model_dir`` and ``OUT/cameras.geojson`` from
     ``poses``; returns what ``result.json`` records of them (file names and CRS)."""
-    from lburst.extras import pycolmap
-
     rec = pycolmap.Reconstruction(str(model_dir))
     points = np.array([p.xyz for p in rec.points3D.values()]).reshape(-1, 3)
     colours = np.array([p.color for p in rec.points3D.values()], np.uint8).reshape(-1, 3)
