@@ -15,7 +15,6 @@ pytest.importorskip("laspy")
 from lburst.geo.fixes import Fix, GnssTrack  # noqa: E402
 from lburst.scenes.flight_gnss import FLIGHT_ORIGIN  # noqa: E402
 from lburst.scenes.night_flight import NightFlightConfig, reference  # noqa: E402
-from lburst.sfm.options import ReconstructOptions  # noqa: E402
 from lburst.sfm.positions import track_priors  # noqa: E402
 
 
@@ -38,19 +37,26 @@ def photos(tmp_path_factory):
     return scene, truth
 
 
-def test_exif_positions_are_held_by_default_and_the_model_is_georeferenced(photos, tmp_path):
+def _reconstruct(scene, out, *flags):
+    from lburst.cli import main
+
+    args = ["reconstruct", str(scene), "--method", "sift,max_features=1500", "--out", str(out), "--threads", "1"]
+    assert main([*args, "--single-camera", *flags]) == 0
+    from lburst.sfm.result import ReconstructionResult
+
+    return ReconstructionResult.load(out / "result.json")
+
+
+def test_exif_positions_are_held_by_default_and_the_model_is_georeferenced(photos, tmp_path, capsys):
     import laspy
 
-    from lburst.sfm import reconstruct_scene
-
     scene, truth = photos
-    options = dict(progress=False, single_camera=True, extra={"max_num_trials": 2000})
-    held = reconstruct_scene(scene, "sift,max_features=1500", tmp_path / "held", ReconstructOptions(**options))
+    held = _reconstruct(scene, tmp_path / "held")
     assert held.registered == held.names
     first = truth["0000"]
     errors = [np.linalg.norm(-R.T @ t - (truth[n] - first)) for n, (R, t) in held.poses.items()]
     assert max(errors) < 0.5  # east, north, up of the first photo's fix: the flight's frame shifted
-    positions = json.loads((tmp_path / "held" / "result.json").read_text())["positions"]
+    positions = held.positions
     assert positions["images"] == 5 and positions["used"] and positions["in_frame"]
     assert positions["source"] == f"the EXIF GPS of 5 of 5 frames of {scene}"
     lat, lon, _ = FLIGHT_ORIGIN.to_geodetic(first)
@@ -61,21 +67,19 @@ def test_exif_positions_are_held_by_default_and_the_model_is_georeferenced(photo
     cameras = json.loads((tmp_path / "held" / "cameras.geojson").read_text())["features"]
     lon0, lat0, _ = cameras[0]["geometry"]["coordinates"]
     assert [c["properties"]["name"] for c in cameras] == held.names and abs(lat0 - lat) * 111_000 < 0.5
-    report = (tmp_path / "held" / "report.md").read_text()
-    assert "- positions: 5 of 5 images from the EXIF GPS of 5 of 5 frames" in report
+    said = "positions: 5 of 5 images from the EXIF GPS of 5 of 5 frames"
+    assert said in (tmp_path / "held" / "report.md").read_text()
+    printed = capsys.readouterr().out
+    assert said in printed and "positions: the model in EPSG:32632: model.las" in printed
 
 
-def test_no_positions_leaves_the_model_in_colmaps_frame(photos, tmp_path):
-    from lburst.sfm import reconstruct_scene
-
+def test_no_positions_leaves_the_model_in_colmaps_frame(photos, tmp_path, capsys):
     scene, truth = photos
     first = truth["0000"]
-    options = dict(progress=False, single_camera=True, extra={"max_num_trials": 2000})
-    free = reconstruct_scene(
-        scene, "sift,max_features=1500", tmp_path / "free", ReconstructOptions(**options, input_positions=False)
-    )
+    free = _reconstruct(scene, tmp_path / "free", "--no-positions")
     assert free.positions is None and not (tmp_path / "free" / "model.las").exists()
     assert min(np.linalg.norm(-R.T @ t - (truth[n] - first)) for n, (R, t) in free.poses.items()) > 2
+    assert "positions:" not in capsys.readouterr().out
 
 
 def test_keyframes_after_the_end_of_the_subtitles_have_no_prior_and_a_note():
