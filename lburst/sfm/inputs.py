@@ -33,6 +33,7 @@ import numpy as np
 
 from lburst import store
 from lburst.burst.io import BurstError, burst_files, load_burst
+from lburst.burst.rosbag import is_bag
 from lburst.burst.sources import Keyframe, Recording, RecordingOptions, is_recording, open_recording
 from lburst.cluster.runner import Runner
 from lburst.extras import MissingExtra
@@ -333,11 +334,11 @@ def open_input(path: str | Path, options: RecordingOptions | None = None) -> Sce
 
 def open_bursts(path: str | Path, options: RecordingOptions | None = None) -> BurstInput | RecordingInput:
     """The input of ``lburst extract`` or ``lburst show`` at ``path``: a :class:`RecordingInput`
-    when it is a recording that the options cut (a folder with ``meta.json`` or DNG frames;
-    with ``options.frame_folders``, any video or frame folder), else one :class:`BurstInput`
+    when it is a recording that the options cut (a folder with ``meta.json`` or DNG frames, a ROS
+    bag; with ``options.frame_folders``, any video or frame folder), else one :class:`BurstInput`
     (a whole video without them is one burst)."""
     path = Path(path)
     cut = options is not None and options.frame_folders
-    if is_recording(path, options) and (path.is_dir() or cut):
+    if is_recording(path, options) and (path.is_dir() or cut or is_bag(path)):
         return RecordingInput(path, options)
     return BurstInput(path)

@@ -168,3 +168,12 @@ def test_fixes_without_a_fix_are_left_out_with_a_note(tmp_path):
     track = open_recording(path).gnss_track()
     assert [f.time for f in track.fixes] == [0.0, 2.0]
     assert track.notes == [f"{path}: /fix: 1 message(s) without a fix (status -1); not used"]
+
+
+def test_extract_cuts_a_bag_into_keyframes_without_every(tmp_path):
+    from lburst.sfm.inputs import RecordingInput, open_bursts
+
+    path = write_bag(tmp_path / "log.bag")
+    source = open_bursts(path, RecordingOptions(burst=1, every=2))
+    assert isinstance(source, RecordingInput)
+    assert [b.name for b in source.keyframe_bursts()] == ["f000000_t0.000s", "f000002_t0.100s", "f000004_t0.200s"]
