@@ -154,7 +154,13 @@ def test_a_worker_killed_during_the_run_costs_its_task_not_the_run(flight, one_p
         assert lburst_main(["extract", *video(flight), "--out", str(out), "--cluster", address]) == 0
     finally:
         cluster.unregister_worker_plugin("kill-once")
-    assert int(marker.read_text()) in before  # a worker of the run was killed, and the run finished
+    killed = int(marker.read_text())
+    assert killed in before  # a worker of the run was killed, and the run finished
+    cluster.wait_for_workers(2, timeout=60)  # the nanny started another in its place
+    after = set(cluster.run(os.getpid).values())
+    assert killed not in after and len(after) == 2
+    with pytest.raises(ProcessLookupError):
+        os.kill(killed, 0)  # it is gone, not merely unregistered
     assert_same_features(out, one_process)
 
 
@@ -190,6 +196,17 @@ def test_bad_cluster_specs_are_refused_with_one_line(flight, tmp_path, capsys, s
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"--cluster {spec!r}" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_local_cluster_takes_back_the_environment_dask_sets_for_its_workers(monkeypatch):
+    """Dask's nanny sets OMP_NUM_THREADS=1 (and more) in this process to spawn each worker with
+    it; once the run's cluster stops, the process has its own environment again."""
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)  # Dask keeps a value that is set
+    before = dict(os.environ)
+    with open_cluster(ClusterSpec(workers=1)) as client:
+        assert os.environ.get("OMP_NUM_THREADS") == "1"  # while it runs: Dask's
+        assert list(client.run(lambda: os.environ.get("OMP_NUM_THREADS")).values()) == ["1"]
+    assert dict(os.environ) == before
 
 
 def test_cluster_specs_are_read():

@@ -15,6 +15,7 @@ from typing import NoReturn
 
 import lburst
 from lburst.errors import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, LBurstError, LBurstValueError
+from lburst.process import state_kept
 
 # (subcommand words, module, one-line help)
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
@@ -186,7 +187,14 @@ def _words(argv: list[str]) -> tuple[str, ...] | None:
 def main(argv: list[str] | None = None) -> int:
     """The ``lburst`` command: its exit status, :data:`EXIT_STATUS`.  Every error that lburst
     raises on purpose (:class:`lburst.LBurstError`) and every ``ValueError`` or ``OSError``
-    ends it here, printed as one line by :func:`error_message`."""
+    ends it here, printed as one line by :func:`error_message`.  Called in-process, it leaves
+    the process as it found it: torch's threads and random state, the warnings format
+    (:func:`lburst.process.state_kept`)."""
+    with state_kept():
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     for stream in (sys.stdout, sys.stderr):  # file names that are not valid UTF-8 print escaped
         if hasattr(stream, "reconfigure"):

@@ -20,6 +20,7 @@ from lburst.cluster.spec import ClusterSpec
 from lburst.errors import LBurstError, LBurstValueError
 from lburst.extras import require
 from lburst.memory import GIB
+from lburst.process import environment_kept
 
 #: seconds to wait for a scheduler to answer (a remote cluster), or for a local cluster's workers
 CONNECT_TIMEOUT_S = 60
@@ -71,36 +72,39 @@ class ClusterError(LBurstError, RuntimeError):
 def open_cluster(spec: ClusterSpec) -> Iterator[Any]:
     """A ``distributed.Client`` of the cluster of ``spec``, closed (and a local cluster
     stopped) when the block ends; a local cluster larger than the machine is refused first
-    (:func:`check_local_workers`)."""
-    if spec.local:
-        check_local_workers(spec.workers)
-    distributed = require("distributed", "--cluster")
-    dask = require("dask", "--cluster")
-    cluster = None
-    try:
+    (:func:`check_local_workers`).  The environment variables that Dask sets in this process
+    for the workers it spawns (``OMP_NUM_THREADS=1``, ``PYTHONHASHSEED``, ...) are taken back
+    when the block ends."""
+    with environment_kept():
         if spec.local:
-            with dask.config.set(WORKER_ENVIRON):
-                cluster = distributed.LocalCluster(
-                    n_workers=spec.workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=":0",  # a free port: another cluster on this machine may hold 8787
-                    silence_logs=logging.CRITICAL,  # failures reach the client, which reports them
-                )
-            client = distributed.Client(cluster)
-        else:
-            check_reachable(spec)
-            client = distributed.Client(spec.address, timeout=CONNECT_TIMEOUT_S)
-    except (OSError, TimeoutError) as exc:
-        if cluster is not None:
-            cluster.close()
-        raise ClusterError(f"--cluster {spec}: no cluster to run on ({exc})") from None
-    try:
-        yield client
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+            check_local_workers(spec.workers)
+        distributed = require("distributed", "--cluster")
+        dask = require("dask", "--cluster")
+        cluster = None
+        try:
+            if spec.local:
+                with dask.config.set(WORKER_ENVIRON):
+                    cluster = distributed.LocalCluster(
+                        n_workers=spec.workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=":0",  # a free port: another cluster on this machine may hold 8787
+                        silence_logs=logging.CRITICAL,  # failures reach the client, which reports them
+                    )
+                client = distributed.Client(cluster)
+            else:
+                check_reachable(spec)
+                client = distributed.Client(spec.address, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError) as exc:
+            if cluster is not None:
+                cluster.close()
+            raise ClusterError(f"--cluster {spec}: no cluster to run on ({exc})") from None
+        try:
+            yield client
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
 
 
 def check_reachable(spec: ClusterSpec) -> None:

@@ -46,6 +46,7 @@ from lburst.model.network import (
     write_checkpoint,
 )
 from lburst.noise import IMAGENET_MEAN, IMAGENET_STD
+from lburst.process import keeps_state
 from lburst.train import distributed
 from lburst.train.data import PairDataset, StreamSampler, init_worker, list_photos
 from lburst.train.distill import lite_distillation_step, teacher_form
@@ -423,6 +424,7 @@ def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds:
     write_checkpoint(state, path)
 
 
+@keeps_state
 def train(
     photo_folders: list[str | Path],
     out: str | Path,
@@ -440,7 +442,8 @@ def train(
 
     Started by ``torchrun`` with several processes, it trains data-parallel
     (:mod:`lburst.train.distributed`): each rank draws its own share of the stream and
-    rank 0 writes the files."""
+    rank 0 writes the files.  It sets torch's thread count (``cfg.threads``) and seeds its
+    global random state for the run only: its caller finds both as they were."""
     out = Path(out)
     ctx = distributed.setup(None if device is None else str(check_device(device)))
     device = ctx.device
