@@ -3,6 +3,7 @@ with a message (``BurstError``/``ValueError``), never a hang, a native crash or 
 result.  The default run is bounded (a few dozen examples per target); set
 ``LBURST_HYPOTHESIS_EXAMPLES`` for a long run, e.g. 2000."""
 
+import math
 import os
 
 import cv2
@@ -10,12 +11,12 @@ import numpy as np
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import HealthCheck, example, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from hypothesis.extra import numpy as hnp  # noqa: E402
 
 from lburst.burst.io import BurstError, load_burst  # noqa: E402
-from lburst.model.extractor import LBurst, MultiScaleConfig  # noqa: E402
+from lburst.model.extractor import MAX_LEVELS, LBurst, MultiScaleConfig  # noqa: E402
 from lburst.model.network import LBurstNet, NetConfig  # noqa: E402
 
 EXAMPLES = int(os.environ.get("LBURST_HYPOTHESIS_EXAMPLES", "40"))
@@ -76,20 +77,53 @@ finite = st.floats(allow_nan=True, allow_infinity=True, width=32)
     rep_thr=finite,
     top_k=st.one_of(st.none(), st.integers(-3, 5000), finite, st.booleans()),
 )
+@example(min_size=1, max_size=1, scale_factor=2, rel_thr=0.0, rep_thr=1.0, top_k=0).via("every lower bound")
+@example(min_size=0, max_size=1, scale_factor=2, rel_thr=0.5, rep_thr=0.5, top_k=None).via("min_size below 1")
+@example(min_size=2, max_size=1, scale_factor=2, rel_thr=0.5, rep_thr=0.5, top_k=None).via("max_size below min_size")
+@example(min_size=1, max_size=1, scale_factor=1, rel_thr=0.5, rep_thr=0.5, top_k=None).via("scale_factor at 1")
+@example(min_size=1, max_size=1, scale_factor=2, rel_thr=1.0000001, rep_thr=0.5, top_k=None).via("rel_thr above 1")
+@example(min_size=1, max_size=1, scale_factor=2, rel_thr=0.5, rep_thr=-1e-9, top_k=None).via("rep_thr below 0")
+@example(min_size=1, max_size=1, scale_factor=2, rel_thr=0.5, rep_thr=0.5, top_k=-1).via("top_k below 0")
+@example(min_size=1, max_size=2**63, scale_factor=2, rel_thr=0.5, rep_thr=0.5, top_k=None).via("64 levels")
+@example(min_size=1, max_size=2**64, scale_factor=2, rel_thr=0.5, rep_thr=0.5, top_k=None).via("65 levels")
 def test_multiscale_settings_are_valid_or_a_value_error(min_size, max_size, scale_factor, rel_thr, rep_thr, top_k):
-    try:
-        cfg = MultiScaleConfig(
-            min_size=min_size,
-            max_size=max_size,
-            scale_factor=scale_factor,
-            rel_thr=rel_thr,
-            rep_thr=rep_thr,
-            top_k=top_k,
-        )
-    except ValueError as err:
-        assert str(err)
+    def integer(v):
+        return isinstance(v, int) and not isinstance(v, bool)
+
+    def real(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    valid = (
+        integer(min_size)
+        and integer(max_size)
+        and 1 <= min_size <= max_size
+        and real(scale_factor)
+        and scale_factor > 1
+        and all(real(v) and 0 <= v <= 1 for v in (rel_thr, rep_thr))
+        and (top_k is None or (integer(top_k) and top_k >= 0))
+    )
+    valid = valid and 1 + math.log(max_size / min_size) / math.log(scale_factor) <= MAX_LEVELS
+    if not valid:
+        with pytest.raises(ValueError, match="."):
+            MultiScaleConfig(
+                min_size=min_size,
+                max_size=max_size,
+                scale_factor=scale_factor,
+                rel_thr=rel_thr,
+                rep_thr=rep_thr,
+                top_k=top_k,
+            )
         return
-    assert cfg.scale_factor > 1 and 1 <= cfg.min_size <= cfg.max_size and 0 <= cfg.rel_thr <= 1
+    cfg = MultiScaleConfig(
+        min_size=min_size, max_size=max_size, scale_factor=scale_factor, rel_thr=rel_thr, rep_thr=rep_thr, top_k=top_k
+    )
+    assert (cfg.min_size, cfg.max_size, cfg.scale_factor, cfg.rel_thr, cfg.top_k) == (
+        min_size,
+        max_size,
+        scale_factor,
+        rel_thr,
+        top_k,
+    )
 
 
 @SETTINGS

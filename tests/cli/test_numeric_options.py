@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import lburst
@@ -66,6 +66,11 @@ def test_a_raw_gain_that_is_not_a_positive_finite_number_is_refused(gain):
         st.floats(allow_nan=True, allow_infinity=True).map(repr),
     )
 )
+@example("0").via("the lower bound")
+@example("1").via("the lower bound")
+@example("1000").via("the upper bound")
+@example("1001").via("the upper bound")
+@example(" 1000 ").via("the upper bound")
 def test_integer_options_accept_exactly_the_integers_in_range(text):
     parse = integer(1, 1000)
     try:
@@ -81,6 +86,12 @@ def test_integer_options_accept_exactly_the_integers_in_range(text):
 
 @settings(max_examples=EXAMPLES, deadline=None)
 @given(st.one_of(st.text(max_size=12), st.floats(allow_nan=True, allow_infinity=True).map(repr)))
+@example("0").via("the open lower bound")
+@example("-0.0").via("the open lower bound")
+@example("5e-324").via("the open lower bound")
+@example("255").via("the upper bound")
+@example(repr(math.nextafter(255, math.inf))).via("the upper bound")
+@example("256").via("the upper bound")
 def test_real_options_accept_exactly_the_finite_numbers_in_range(text):
     parse = real(0, 255, low_open=True)
     try:
@@ -100,9 +111,21 @@ def test_real_options_accept_exactly_the_finite_numbers_in_range(text):
         st.integers(), st.floats(allow_nan=True, allow_infinity=True), st.booleans(), st.none(), st.text(max_size=4)
     )
 )
+@example(0).via("the bounds")
+@example(-1).via("the bounds")
+@example(10).via("the bounds")
+@example(11).via("the bounds")
+@example(1).via("the bounds")
+@example(2).via("the bounds")
+@example(-1.0).via("the bounds")
+@example(1.0).via("the bounds")
+@example(math.nextafter(1, math.inf)).via("the bounds")
+@example(math.nextafter(-1, -math.inf)).via("the bounds")
+@example(np.int64(10)).via("NumPy integers")
+@example(np.float32(1.0)).via("NumPy floats")
 def test_the_api_checks_agree_with_the_cli(value):
-    numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if numeric and isinstance(value, int) and 0 <= value <= 10:
+    numeric = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    if numeric and isinstance(value, (int, np.integer)) and 0 <= value <= 10:
         assert check_integer(value, "n", 0, 10) == value
     else:
         with pytest.raises(ValueError, match="^n must be an integer"):
