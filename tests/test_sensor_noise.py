@@ -1,6 +1,8 @@
-"""Calibrated sensor presets (``sensor:NAME@ISO``): the statistics a camera calibration measures,
-recovered from simulated dark and flat frames, match the published figures within 10 %, and each
-measurement misses its figure when the model's noise term behind it is dropped.
+"""Calibrated sensor presets (``sensor:NAME@ISO``): lburst's table holds the figures of the cited
+calibration (written out here, apart from it), the statistics a camera calibration measures,
+recovered from simulated dark and flat frames, match those figures within the measurements' own
+precision (:data:`TOLERANCE`), and each measurement misses its figure when the model's noise term
+behind it is dropped.
 
 The measurements, as a calibration does them on raw frames (``docs/noise.md``):
 
@@ -13,11 +15,12 @@ The measurements, as a calibration does them on raw frames (``docs/noise.md``):
   the same row-free dark frames: the shape whose probability plot is straightest, the scale its
   slope;
 - system gain K: the slope of the variance against the mean (DN above black) of flat frames at
-  several light levels (photon transfer).
+  several light levels (photon transfer), none of them clipped at the white level.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -26,8 +29,100 @@ from scipy import optimize
 
 from lburst.noise import SENSORS, SensorNoise, noise_from_spec, tukey_lambda_variance
 
-TOLERANCE = 0.10
 DARK = (8, 512, 512)  # frames, rows, columns of the dark-frame stack
+#: How far each measurement may lie from its figure (relative): about 1.25 times the largest error
+#: over the tested presets and seeds 0-4 (docs/noise.md); on this seed a figure 8 % off is caught.
+TOLERANCE = {
+    "black level": 0.001,
+    "black bias": 0.05,
+    "row noise": 0.055,
+    "gain K": 0.01,
+    "Gaussian read noise": 0.005,
+    "Tukey-lambda shape": 0.06,
+    "Tukey-lambda scale": 0.04,
+}
+
+#: The figures as the cited source writes them (PMN, megvii-research/PMN, data_process/process.py;
+#: docs/noise.md), kept here apart from lburst's table so that the test checks the table.
+#: IMX686: get_specific_noise_params()['IMX686']['6400'] K, sigGs; get_camera_noisy_params()['IMX686']
+#: q, wp, bl, lam, sigTLk, sigTLb, sigRk, sigRb; get_camera_noisy_params_max()['IMX686_6400'] bias.
+IMX686 = {
+    "K": 8.7425333,
+    "sigGs": 14.303619546153575,
+    "bits": 10,
+    "wp": 1023,
+    "bl": 64,
+    "lam": 0.102,
+    "sigTLk": 0.85187,
+    "sigTLb": 0.07991,
+    "sigRk": 0.87611,
+    "sigRb": -2.11455,
+    "bias": -0.56896687,
+}
+#: A7S2: get_camera_noisy_params_max()['SonyA7S2_<ISO>']: Kmax, lam, sigTL, sigGs, sigR, biassig
+#: (bias 0, q 2**-14, wp 16383, bl 512).
+A7S2 = {
+    50: (0.047815, 0.1474653, 0.70727646, 1.0164667, 0.13997398, 0.010093017),
+    64: (0.0612032, 0.13243394, 0.71535635, 1.0509665, 0.14346549, 0.008690166),
+    80: (0.076504, 0.1121489, 0.7799473, 1.180899, 0.19540153, 0.0107246125),
+    100: (0.09563, 0.14875287, 0.70181876, 1.0067395, 0.1391465, 0.007235429),
+    125: (0.1195375, 0.12904578, 0.6961967, 1.0279676, 0.14485553, 0.008026363),
+    160: (0.153008, 0.094135, 0.7258587, 1.1293099, 0.19755602, 0.0101351),
+    200: (0.19126, 0.07902429, 0.8117464, 1.2926387, 0.22815849, 0.011413908),
+    250: (0.239075, 0.051688068, 0.8630922, 1.4345995, 0.26271912, 0.013569083),
+    320: (0.306016, 0.040700804, 1.0334468, 1.7481371, 0.3097104, 0.017825918),
+    400: (0.38252, 0.0222538, 1.1816813, 2.0595572, 0.36209714, 0.021005306),
+    500: (0.47815, -0.0031342343, 1.31772, 2.3956928, 0.42528257, 0.02981831),
+    640: (0.612032, 0.002566592, 1.6474211, 2.9662898, 0.48839623, 0.10000693),
+    800: (0.76504, -0.008199721, 1.9346539, 3.5475867, 0.5723769, 0.025339302),
+    1000: (0.9563, -0.021061005, 2.2795107, 4.2727833, 0.6845563, 0.027911892),
+    1250: (1.195375, -0.032423194, 2.708437, 5.177596, 0.8177013, 0.03293372),
+    1600: (1.53008, -0.0441045, 3.2283993, 6.29925, 0.988786, 0.03877672),
+    2000: (1.9126, -0.012963797, 1.4356787, 2.653871, 0.33124214, 0.01570677),
+    2500: (2.39075, -0.027097283, 1.6897862, 3.200225, 0.38264316, 0.018728448),
+    3200: (3.06016, -0.034863412, 2.0417721, 3.9193838, 0.44543457, 0.021355819),
+    4000: (3.8252, -0.043700505, 2.4629273, 4.8015847, 0.52347374, 0.026152484),
+    5000: (4.7815, -0.053150143, 2.9761007, 5.8995814, 0.6190265, 0.058574405),
+    6400: (6.12032, -0.07517104, 3.4502964, 7.1163535, 0.7218788, 0.059074216),
+    8000: (7.6504, -0.08208357, 4.269624, 8.916516, 0.87760293, 0.084842026),
+    10000: (9.563, -0.073289566, 5.495318, 11.291476, 1.0522343, 0.107438326),
+    12800: (12.24064, -0.06495205, 7.038261, 14.245901, 1.2749791, 0.0944684),
+    16000: (15.3008, -0.060692135, 8.877547, 17.833515, 1.5559287, 0.09725099),
+    20000: (19.126, -0.060213074, 11.002351, 22.084776, 1.8810822, 0.4984733),
+    25600: (24.48128, -0.09089118, 12.175712, 25.853043, 2.2760193, 0.37568903),
+}
+
+
+def cited(sensor: str, iso: int) -> dict[str, float]:
+    """Every figure of ``sensor`` at ``iso`` as the source gives it (:data:`IMX686`, :data:`A7S2`),
+    under :class:`lburst.noise.SensorFigures`' names, with the converter and black level."""
+    if sensor == "imx686" and iso == 6400:
+        log_k = math.log(IMX686["K"])
+        return {
+            "gain": IMX686["K"],
+            "read_std": IMX686["sigGs"],
+            "tl_shape": IMX686["lam"],
+            "tl_scale": math.exp(IMX686["sigTLk"] * log_k + IMX686["sigTLb"]),
+            "row_std": math.exp(IMX686["sigRk"] * log_k + IMX686["sigRb"]),
+            "black_bias": IMX686["bias"],
+            "bias_std": 0.0,
+            "adc_bits": IMX686["bits"],
+            "white_level": IMX686["wp"],
+            "black_level": IMX686["bl"],
+        }
+    k, lam, sig_tl, sig_gs, sig_r, bias_sig = A7S2[iso]
+    return {
+        "gain": k,
+        "read_std": sig_gs,
+        "tl_shape": lam,
+        "tl_scale": sig_tl,
+        "row_std": sig_r,
+        "black_bias": 0.0,
+        "bias_std": bias_sig,
+        "adc_bits": 14,
+        "white_level": 16383,
+        "black_level": 512,
+    }
 
 
 def dark_frames(model: SensorNoise, shape=DARK, seed: int = 0) -> np.ndarray:
@@ -78,13 +173,20 @@ def tukey_lambda_fit(dark: np.ndarray) -> tuple[float, float]:
     return float(lam), float(slope)
 
 
+#: Exposures of the flat frames: mean DN above black, as fractions of the range up to white; the
+#: brightest stays 5 standard deviations below white even at twice the published gain, so
+#: that no flat frame clips (a clipped frame's variance would pull the slope towards any figure).
+FLAT_LEVELS = (0.02, 0.05, 0.1, 0.2)
+
+
 def photon_transfer_gain(model: SensorNoise, electrons: list[float], seed: int = 1) -> float:
     """K: the slope of variance against mean (DN above black) of flat frames of ``electrons`` mean
-    photo-electrons each."""
+    photo-electrons each; none of their pixels may reach the white level."""
     means, variances = [], []
     for i, level in enumerate(electrons):
         flat = replace(model, photons=level / model.quantum_efficiency)
         frames = flat.raw_dn(np.full((2, 256, 512), 255.0, np.float32), np.random.default_rng([seed, i]), bayer=True)
+        assert frames.max() < model.white_level, f"flat frame {i} clips at {model.white_level} DN"
         frames = frames.astype(np.float64) - model.black_level
         means.append(frames.mean())
         variances.append(frames.var())
@@ -92,37 +194,32 @@ def photon_transfer_gain(model: SensorNoise, electrons: list[float], seed: int =
 
 
 def published(sensor: str, iso: int, read: str) -> dict[str, float]:
-    """The figures of :data:`lburst.noise.SENSORS` a calibration of ``sensor`` at ``iso`` measures."""
-    preset, figures = SENSORS[sensor], SENSORS[sensor].isos[iso]
+    """The figures a calibration of ``sensor`` at ``iso`` measures, as the source gives them (:func:`cited`)."""
+    figures = cited(sensor, iso)
     out = {
-        "black level": preset.black_level + figures.black_bias,
-        "row noise": figures.row_std,
-        "gain K": figures.gain,
+        "black level": figures["black_level"] + figures["black_bias"],
+        "row noise": figures["row_std"],
+        "gain K": figures["gain"],
     }
     if read == "gauss":
-        out["Gaussian read noise"] = figures.read_std
+        out["Gaussian read noise"] = figures["read_std"]
     else:
-        out["Tukey-lambda shape"], out["Tukey-lambda scale"] = figures.tl_shape, figures.tl_scale
-    if figures.black_bias:
-        out["black bias"] = figures.black_bias
+        out["Tukey-lambda shape"], out["Tukey-lambda scale"] = figures["tl_shape"], figures["tl_scale"]
+    if figures["black_bias"]:
+        out["black bias"] = figures["black_bias"]
     return out
 
 
-def calibrate(model: SensorNoise, figures: dict[str, float], dark_shape=DARK) -> dict[str, float]:
+def calibrate(model: SensorNoise, figures: dict[str, float], dark_shape=DARK, seed: int = 0) -> dict[str, float]:
     """What a calibration measures of ``model``'s dark and flat frames (module docstring), for each
-    of the published ``figures`` (which also set the flat frames' exposures: shot-noise variance 1,
-    3, 10 and 30 times the dark variance)."""
-    dark = dark_frames(model, dark_shape)
-    if "Gaussian read noise" in figures:
-        read_var = figures["Gaussian read noise"] ** 2
-    else:
-        read_var = figures["Tukey-lambda scale"] ** 2 * tukey_lambda_variance(figures["Tukey-lambda shape"])
-    dark_var = read_var + figures["row noise"] ** 2
-    electrons = [f * dark_var / figures["gain K"] ** 2 for f in (1.0, 3.0, 10.0, 30.0)]
+    of the published ``figures`` (whose gain also sets the flat frames' exposures, :data:`FLAT_LEVELS`)."""
+    dark = dark_frames(model, dark_shape, seed)
+    span = model.white_level - figures["black level"]
+    electrons = [f * span / figures["gain K"] for f in FLAT_LEVELS]
     out = {
         "black level": black_level(dark),
         "row noise": row_std(dark),
-        "gain K": photon_transfer_gain(model, electrons),
+        "gain K": photon_transfer_gain(model, electrons, seed + 1),
     }
     if "Gaussian read noise" in figures:
         out["Gaussian read noise"] = gaussian_std(dark)
@@ -133,8 +230,8 @@ def calibrate(model: SensorNoise, figures: dict[str, float], dark_shape=DARK) ->
     return out
 
 
-def close(value: float, figure: float) -> bool:
-    return abs(value - figure) <= TOLERANCE * abs(figure)
+def close(value: float, figure: float, tolerance: float = 0.10) -> bool:
+    return abs(value - figure) <= tolerance * abs(figure)
 
 
 PRESETS = ["imx686@6400", "imx686@6400,read=tl", "a7s2@100", "a7s2@1600", "a7s2@6400", "a7s2@25600"]
@@ -145,8 +242,25 @@ def test_a_calibration_of_the_simulated_sensor_recovers_the_published_figures(pr
     model = noise_from_spec(f"sensor:{preset}")
     figures = published(model.sensor, model.iso, model.read)
     measured = calibrate(model, figures)
-    off = {k: (measured[k], figures[k]) for k in figures if not close(measured[k], figures[k])}
-    assert not off, f"{preset}: (recovered, published) more than 10 % apart: {off}"
+    off = {k: (measured[k], figures[k]) for k in figures if not close(measured[k], figures[k], TOLERANCE[k])}
+    assert not off, f"{preset}: (recovered, published) further apart than {TOLERANCE}: {off}"
+
+
+def test_the_preset_table_holds_the_cited_figures():
+    """lburst's table (lburst.noise.SENSORS) against the source's figures, every ISO: a figure
+    changed in the table changes the simulated sensor, and so the measurements above."""
+    assert set(SENSORS) == {"imx686", "a7s2"}
+    assert set(SENSORS["a7s2"].isos) == set(A7S2) and set(SENSORS["imx686"].isos) == {6400}
+    for name, sensor in SENSORS.items():
+        for iso, figures in sensor.isos.items():
+            source = cited(name, iso)
+            assert (sensor.adc_bits, 2**sensor.adc_bits - 1, sensor.black_level) == (
+                source["adc_bits"],
+                source["white_level"],
+                source["black_level"],
+            )
+            for field in ("gain", "read_std", "tl_shape", "tl_scale", "row_std", "black_bias", "bias_std"):
+                assert getattr(figures, field) == pytest.approx(source[field], rel=1e-12, abs=1e-15), (name, iso, field)
 
 
 @pytest.mark.parametrize("iso", [100, 1600, 6400, 25600])
@@ -183,7 +297,10 @@ def test_each_measurement_misses_its_figure_when_its_noise_term_is_dropped(prese
     figures = published(model.sensor, model.iso, model.read)
     dropped = drop(model) if callable(drop) else replace(model, **drop)
     value = calibrate(dropped, figures, (2, 512, 512))[measurement]
-    assert not close(value, figures[measurement]), f"{term} dropped, yet {measurement} {value:.4g} is within 10 %"
+    tolerance = TOLERANCE[measurement]
+    assert not close(value, figures[measurement], tolerance), (
+        f"{term} dropped, yet {measurement} {value:.4g} is within {tolerance:.0%}"
+    )
 
 
 def test_raw_values_are_whole_dn_of_the_sensors_bit_depth_and_saturate_at_white():
