@@ -74,6 +74,40 @@ def test_onnx_light_model_extracts_through_lburst(net, exported):
         np.testing.assert_allclose(got[key], ref[key], atol=1e-4)
 
 
+def _assert_same_features(got: dict, ref: dict) -> None:
+    """The keypoints of ``got`` are those of ``ref`` (the same positions and scales, in any order: scores
+    within float rounding of each other may rank either way), with their scores and descriptors."""
+
+    def where(features: dict) -> dict:
+        keys = np.column_stack([features["keypoints"], features["scales"]]).round(3)
+        return {tuple(key): i for i, key in enumerate(keys.tolist())}
+
+    a, b = where(got), where(ref)
+    assert a.keys() == b.keys(), f"{len(a.keys() - b.keys())} keypoints more, {len(b.keys() - a.keys())} missing"
+    common = sorted(a)
+    i, j = [a[k] for k in common], [b[k] for k in common]
+    np.testing.assert_allclose(got["scores"][i], ref["scores"][j], atol=1e-5)
+    np.testing.assert_allclose(got["descriptors"][i], ref["descriptors"][j], atol=1e-4)
+
+
+@pytest.mark.parametrize("runtime", ["onnx", "openvino"])
+@pytest.mark.parametrize("top_k", [None, 300])
+def test_the_runtimes_extract_the_keypoints_and_descriptors_of_torch(net, exported, runtime, top_k):
+    """Every pyramid level (odd sizes included) through ONNX Runtime or OpenVINO: the keypoints,
+    scales, scores and descriptors of the torch network."""
+    if runtime == "onnx":
+        model = LBurst.from_onnx(exported)
+    else:
+        pytest.importorskip("openvino")
+        model = LBurst(None, runner=rt.OpenVinoRunner(exported, threads=1), frames=SMALL.frames)
+    model.align = False
+    burst = np.random.default_rng(1).integers(0, 256, (3, 70, 90, 3), dtype=np.uint8)
+    options = dict(top_k=top_k, min_size=32, rel_thr=0.0, rep_thr=0.0)  # a random network: every local maximum
+    got, ref = model.extract(burst, **options), LBurst(net).extract(burst, **options)
+    assert len(set(ref["scales"].tolist())) >= 4 and len(ref["keypoints"]) >= 300
+    _assert_same_features(got, ref)
+
+
 @pytest.fixture(scope="module")
 def converted(net):
     """The small light net converted from torch by ``openvino.convert_model`` (done once: slow)."""
