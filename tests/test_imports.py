@@ -35,9 +35,24 @@ def _runtime_nodes(tree: ast.AST):
         stack.extend(ast.iter_child_nodes(node))
 
 
+def import_call(node: ast.AST) -> str | None:
+    """The module a call of ``importlib.import_module(NAME)`` (or ``import_module``, ``__import__``)
+    imports: NAME where it is a string constant, ``''`` where it is computed at run time;
+    ``None`` for any other node."""
+    if not isinstance(node, ast.Call) or not node.args:
+        return None
+    func = node.func
+    called = func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else None
+    if called not in ("import_module", "__import__"):
+        return None
+    first = node.args[0]
+    return first.value if isinstance(first, ast.Constant) and isinstance(first.value, str) else ""
+
+
 def imports_of(name: str, path: Path, modules: dict[str, Path], type_only: bool = True) -> set[str]:
-    """lburst modules that ``name`` imports anywhere (module level or in functions), those of
-    ``if TYPE_CHECKING:`` blocks too unless ``type_only`` is false (only the imports that run)."""
+    """lburst modules that ``name`` imports anywhere (module level or in functions, by an import
+    statement or by ``importlib.import_module`` of a constant name), those of ``if TYPE_CHECKING:``
+    blocks too unless ``type_only`` is false (only the imports that run)."""
     package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
     found = set()
     tree = ast.parse(path.read_text(encoding="utf-8"))
@@ -51,6 +66,8 @@ def imports_of(name: str, path: Path, modules: dict[str, Path], type_only: bool 
             for alias in node.names:
                 sub = f"{base}.{alias.name}"
                 found.add(sub if sub in modules else base)
+        elif import_call(node):
+            found.add(import_call(node))
     return {m for m in found if m in modules and m != name}
 
 
@@ -213,6 +230,8 @@ def inner_imports() -> set[tuple[str, str]]:
                     found.add((name, node.module))
                 elif isinstance(node, ast.Import):
                     found |= {(name, a.name) for a in node.names if a.name.split(".")[0] == "lburst"}
+                elif (import_call(node) or "").split(".")[0] == "lburst":
+                    found.add((name, import_call(node)))
     return found
 
 
@@ -229,3 +248,43 @@ def test_the_inner_imports_test_sees_an_import_in_a_function(tmp_path, monkeypat
     module.write_text("def f():\n    from lburst.noise import GaussianNoise\n    return GaussianNoise\n")
     monkeypatch.setattr(sys.modules[__name__], "module_names", lambda: {"lburst.m": module})
     assert inner_imports() == {("lburst.m", "lburst.noise")}
+
+
+def test_the_import_graph_sees_importlib_imports(tmp_path, monkeypatch):
+    """``importlib.import_module("lburst.x")`` is an arrow of the graph, and in a function an inner import."""
+    module = tmp_path / "lburst" / "m.py"
+    module.parent.mkdir()
+    module.write_text(
+        "import importlib\n"
+        "from importlib import import_module\n"
+        "RESULT = importlib.import_module('lburst.sfm.result')\n"
+        "def f():\n"
+        "    return import_module('lburst.noise'), __import__('lburst.tum')\n"
+    )
+    modules = module_names()
+    assert imports_of("lburst.m", module, modules) == {"lburst.sfm.result", "lburst.noise", "lburst.tum"}
+    monkeypatch.setattr(sys.modules[__name__], "module_names", lambda: {"lburst.m": module})
+    assert inner_imports() == {("lburst.m", "lburst.noise"), ("lburst.m", "lburst.tum")}
+
+
+#: Modules that import a module whose name they compute at run time (the graph cannot follow
+#: those arrows), and why.
+DYNAMIC_IMPORTS = {
+    "lburst": "its public names load on first use (_EXPORTS)",
+    "lburst.sfm": "its public names load on first use (_EXPORTS)",
+    "lburst.methods": "each method's module registers it when first asked for (_PROVIDERS)",
+    "lburst.cli": "each subcommand's module (COMMANDS), imported when it runs",
+    "lburst.extras": "optional dependencies, by the name a caller asks for",
+}
+
+
+def test_only_the_listed_modules_import_by_a_computed_name():
+    found = {
+        name
+        for name, path in module_names().items()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if import_call(node) == ""
+    }
+    assert found == set(DYNAMIC_IMPORTS), (
+        f"unlisted: {sorted(found - set(DYNAMIC_IMPORTS))}, gone: {sorted(set(DYNAMIC_IMPORTS) - found)}"
+    )
