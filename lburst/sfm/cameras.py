@@ -37,7 +37,8 @@ def check_reference(path: Path) -> dict[str, dict]:
         Reference.load(path)
         cameras = reference_cameras(path)
     except (ValueError, KeyError, TypeError, AttributeError) as err:
-        raise ReconstructionError(f"{path}: malformed reference file ({err})") from err
+        named = str(err).startswith(f"{path}:")  # Reference.load names the file already
+        raise ReconstructionError(str(err) if named else f"{path}: malformed reference file ({err})") from err
     for name, camera in cameras.items():
         try:
             check_camera(camera)

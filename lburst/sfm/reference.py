@@ -105,7 +105,8 @@ class Reference:
         try:
             return cls._from_json(data)
         except (KeyError, TypeError, ValueError) as err:
-            raise LBurstValueError(f"{path}: malformed reference file: {err!r}") from err
+            problem = f"no {err.args[0]}" if isinstance(err, KeyError) else str(err)
+            raise LBurstValueError(f"{path}: malformed reference file: {problem}") from err
 
     @classmethod
     def _from_json(cls, data: Any) -> "Reference":
