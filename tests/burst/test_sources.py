@@ -121,8 +121,15 @@ def test_sixteen_bit_frames_get_one_gain_per_recording(tmp_path):
     # the first burst is frames 0, 0, 1 (linear 0, 0, 100): its mean, 100 / 3, goes to 0.5
     assert rec.gain == pytest.approx(0.5 * 65535 / (100 / 3))
     assert all(b.dtype == np.uint8 for _, b in bursts)
-    # the same linear value gives the same output in every burst: frame 1 and frame 4 (first and second bursts)
-    assert bursts[0][1][2, 0, 0, 0] > 0
+    # every burst through that one gain: the linear value v of any frame comes out as v * gain (at a target
+    # that leaves the brighter later bursts unclipped; a gain of their own would map each burst's mean to it)
+    dim = open_recording(
+        folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(percentile=100, target=0.05))
+    )
+    values = [_values(b) for _, b in dim.bursts()]
+    linear_values = [(0, 0, 100), (300, 400, 500), (700, 800, 800)]
+    assert values == [[min(255, round(v * dim.gain / 65535 * 255)) for v in b] for b in linear_values]
+    assert values == [[0, 0, 38], [115, 153, 191], [255, 255, 255]]
     linear = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(gain="none")))
     assert all(b.dtype == np.uint16 for _, b in linear.bursts())
     fixed = open_recording(folder, RecordingOptions(burst=3, every=4, normalisation=Normalisation(gain=65535 / 200)))

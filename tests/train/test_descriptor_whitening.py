@@ -158,3 +158,33 @@ def test_asking_weights_without_whitening_to_whiten_fails_before_any_work(net, t
     with pytest.raises(ValueError, match="no descriptor whitening"):
         create(f"lburst:{tmp_path / 'plain.pt'},whiten=true")
     assert create(f"lburst:{tmp_path / 'plain.pt'}") is not None
+
+
+def test_export_whitened_cli_writes_the_weights_that_whiten_checkpoint_writes(tmp_path, capsys):
+    """The success path: the shipped single-image weights whitened on 3 of 4 photos with the
+    command's --count, --power and --seed, as the library function does it with the same values."""
+    from lburst.cli import main
+    from lburst.train.whitening import sample_photos
+    from lburst.weights import weights_path
+
+    rng = np.random.default_rng(4)
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for name in ("a1", "a2", "a3", "a4"):  # none of these stems is in the validation tenth
+        write_image(folder / f"{name}.png", _photo(rng))
+    source = weights_path("lburst-b1")
+    argv = ["export", "whitened", str(source), "--out", str(tmp_path / "w.pt"), "--photos", str(folder)]
+    assert main([*argv, "--count", "3", "--power", "0.5", "--seed", "2"]) == 0
+    assert capsys.readouterr().out.strip() == f"wrote {tmp_path / 'w.pt'} (descriptor statistics of 3 training photos)"
+    _, extra = load_checkpoint(tmp_path / "w.pt")
+    meta = extra["meta"]
+    assert meta["descriptor_statistics"]["photos"] == 3
+    assert (meta["descriptor_statistics"]["seed"], meta["descriptor_statistics"]["power"]) == (2, 0.5)
+    mean, matrix = whiten_checkpoint(
+        source, tmp_path / "library.pt", sample_photos([folder], 3, 2), seed=2, power=0.5, progress=False
+    )
+    np.testing.assert_array_equal(meta["descriptor_mean"].numpy(), mean)
+    np.testing.assert_array_equal(meta["descriptor_whitening"].numpy(), matrix)
+    whitened = LBurst.from_checkpoint(tmp_path / "w.pt", device="cpu").extract(_photo(rng), whiten=True)
+    assert len(whitened["descriptors"]) > 0
+    np.testing.assert_allclose(np.linalg.norm(whitened["descriptors"], axis=1), 1.0, atol=1e-5)

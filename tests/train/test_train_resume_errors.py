@@ -80,8 +80,12 @@ def test_a_resumed_run_takes_the_precision_of_the_machine_it_continues_on(photos
     check_resume_options(tmp_path, given_options(args))  # not refused: precision is the machine's
     train([photos], tmp_path, replace(CFG, steps=2), resume=True, progress=False, precision="fp32")
     assert json.loads((tmp_path / "config.json").read_text())["precision"] == "fp32"
-    train([photos], tmp_path, replace(CFG, steps=3), resume=True, progress=False)  # not given: the run's own
-    assert json.loads((tmp_path / "config.json").read_text())["precision"] == "fp32"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        train([photos], tmp_path, replace(CFG, steps=3), resume=True, progress=False, precision="bf16")
+        assert json.loads((tmp_path / "config.json").read_text())["precision"] == "bf16"
+        train([photos], tmp_path, replace(CFG, steps=4), resume=True, progress=False)  # not given: the run's own
+    assert json.loads((tmp_path / "config.json").read_text())["precision"] == "bf16"  # not the default, fp32
 
 
 @pytest.mark.parametrize(
