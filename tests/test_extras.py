@@ -184,3 +184,24 @@ def test_check_installed_names_the_extra_without_importing(monkeypatch):
     monkeypatch.setitem(sys.modules, "pycolmap", None)
     with pytest.raises(MissingExtra, match=r"pip install 'lburst\[sfm\]'"):
         check_installed("pycolmap", "reconstruction")
+
+
+def test_the_dev_extra_brings_every_package_a_test_would_skip_without():
+    """``pip install -e ".[dev]"`` (what ``make test`` installs) gives every test what it imports
+    with ``pytest.importorskip``, so that none skips for a missing package (the kornia ones did)."""
+    import re
+    from pathlib import Path
+
+    from lburst.extras import EXTRAS
+
+    root = Path(__file__).resolve().parents[1]
+    dev = re.search(r"^dev = \[(.*)\]$", (root / "pyproject.toml").read_text(), re.M).group(1)
+    listed = {re.split(r"[<>=!~\[ ;]", requirement)[0].lower() for requirement in re.findall(r'"([^"]+)"', dev)}
+    extras = set(re.search(r"lburst\[([^\]]*)\]", dev).group(1).split(","))
+    sources = "".join(path.read_text(encoding="utf-8") for path in sorted((root / "tests").rglob("*.py")))
+    skipped_without = {name.split(".")[0] for name in re.findall(r'importorskip\(\s*"([\w.]+)"', sources)}
+    core = {"lburst", "torch", "tomllib"}  # lburst, its own dependencies, the standard library of Python 3.11+
+    missing = sorted(
+        name for name in skipped_without - core if name not in listed and EXTRAS.get(name, ("", ""))[1] not in extras
+    )
+    assert "kornia" in skipped_without and not missing, f"add to the dev extra in pyproject.toml: {missing}"
