@@ -154,7 +154,7 @@ def test_an_uncalibrated_camera_info_is_refused_unless_a_meta_json_says_what_to_
     with pytest.raises(
         BurstError, match=r"u.bag: /cam/camera_info: CameraInfo with focal length 0, 0 \(an uncalibrated"
     ):
-        open_recording(path).camera
+        _ = open_recording(path).camera
     (tmp_path / "u.meta.json").write_text(json.dumps({"camera": None}))
     assert open_recording(path).camera is None and open_recording(path).camera_source == "meta.json"
 
