@@ -14,7 +14,7 @@ from __future__ import annotations
 #: Exit status of the ``lburst`` command: it finished.
 EXIT_OK = 0
 #: It ran, but some or all of its work failed (an input among several, COLMAP registered
-#: no image, a recording stopped early); what it finished is kept.
+#: no image, a model that fails its checks, a recording stopped early); what it finished is kept.
 EXIT_FAILED = 1
 #: It did nothing: bad options or input (a usage error, a bad spec, a missing or unreadable
 #: file, a missing optional extra, a folder another run holds).

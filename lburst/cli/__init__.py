@@ -142,8 +142,8 @@ def build_parser(load: tuple[str, ...] | None = None) -> argparse.ArgumentParser
 EXIT_STATUS = f"""\
 exit status:
   {EXIT_OK}    finished
-  {EXIT_FAILED}    ran, but some of its work failed (an input it skipped, no model, a recording
-       cut short); what it finished is kept
+  {EXIT_FAILED}    ran, but some of its work failed (an input it skipped, no model, a model
+       that fails its checks, a recording cut short); what it finished is kept
   {EXIT_BAD_INPUT}    did nothing: bad options or input (usage, a bad spec or value, a missing or
        unreadable file, a missing optional extra, an output folder in use)
   {EXIT_INTERRUPTED}  interrupted; finished work is kept and a re-run resumes

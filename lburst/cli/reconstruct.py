@@ -24,6 +24,7 @@ from lburst.sfm.options import (
 from lburst.sfm.positions import DEFAULT_STD_M, MAX_STD_M, MIN_STD_M, describe
 from lburst.sfm.reconstruct import reconstruct_scene
 from lburst.sfm.result import Status
+from lburst.sfm.trust import describe_checks
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -204,6 +205,10 @@ def main(args: argparse.Namespace) -> int:
         print(f"camera: {result.metrics['camera']}")
     for line in describe(result.positions) if result.positions else ():
         print(line)
+    partial = f"{result.error} (the {len(result.names)} keyframes before it were used)"
+    if not result.trusted:  # exit 1: a model that its checks find folded is no success (lburst.sfm.trust)
+        raise RunFailed(describe_checks(result.checks) + (f"; {partial}" if result.status == Status.PARTIAL else ""))
+    print(describe_checks(result.checks))
     if result.status == Status.PARTIAL:
-        raise RunFailed(f"{result.error} (the {len(result.names)} keyframes before it were used)")
+        raise RunFailed(partial)
     return 0

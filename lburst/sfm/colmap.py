@@ -45,6 +45,7 @@ from lburst.numbers import check_integer
 from lburst.process import folder_lock
 from lburst.sfm.join import join_models
 from lburst.sfm.prior_alignment import align_to_priors
+from lburst.sfm.trust import model_measures
 
 
 def atomic_path(path: str | Path):
@@ -411,12 +412,15 @@ def map_database(
     options: ColmapOptions,
     stages: StageLog | None = None,
     use_priors: bool = False,
+    joins: list[dict] | None = None,
 ) -> pycolmap.Reconstruction | None:
     """Run the mapper; return the model with the most registered images (joined with the
     others where ``options.join_models`` says so), or ``None`` if none.  ``stages``: where
     to record the mapping and the joining as stages.  ``use_priors``: the incremental mapper
     holds the cameras near the database's position priors in bundle adjustment and returns
-    the model in their frame (the global mapper does not take them: refused).
+    the model in their frame (the global mapper does not take them: refused).  ``joins``:
+    when given, receives how each join of the returned model holds
+    (:func:`lburst.sfm.join.join_links`).
 
     While the model leaves images of the database unregistered, the mapper runs again, up to
     ``options.mapper_attempts`` runs in all, with seed ``seed + k * ATTEMPT_SEED_STEP`` for the
@@ -424,7 +428,7 @@ def map_database(
     images, then the most 3D points, is kept: the choice reads nothing but the models."""
     with pycolmap.Database.open(str(db_path)) as db:
         total = db.num_images()
-    best, label = None, ""
+    best, best_joins, label = None, [], ""
     for attempt in range(options.mapper_attempts):
         run, folder = options, Path(work_dir)
         if attempt:
@@ -432,11 +436,14 @@ def map_database(
             folder = folder / f"attempt{attempt}"
             registered = 0 if best is None else best.num_reg_images()
             label = f", again: {registered} of {total} images registered, seed {run.seed}"
-        model = _map_once(db_path, image_dir, folder, run, stages, use_priors, label)
+        links: list[dict] = []
+        model = _map_once(db_path, image_dir, folder, run, stages, use_priors, label, links)
         if model is not None and (best is None or _size(model) > _size(best)):
-            best = model
+            best, best_joins = model, links
         if best is not None and best.num_reg_images() >= total:
             break
+    if joins is not None:
+        joins.extend(best_joins)
     return best
 
 
@@ -453,8 +460,10 @@ def _map_once(
     stages: StageLog | None,
     use_priors: bool,
     label: str = "",
+    joins: list[dict] | None = None,
 ) -> pycolmap.Reconstruction | None:
-    """One run of the mapper (:func:`map_database`); ``label`` ends its stages' names."""
+    """One run of the mapper (:func:`map_database`); ``label`` ends its stages' names,
+    ``joins`` receives how its joins hold."""
     pycolmap.set_random_seed(options.seed)
     threads = options.num_threads if options.mapper_threads is None else options.mapper_threads
     work_dir = Path(work_dir)
@@ -473,7 +482,7 @@ def _map_once(
             models = pycolmap.incremental_mapping(str(db_path), str(image_dir), str(work_dir), opts)
         if len(models) > 1 and options.join_models:
             with _stage(stages, f"joining {len(models)} models (triangulation, bundle adjustment){label}"):
-                return join_models(models.values(), db_path, image_dir, work_dir, opts)
+                return join_models(models.values(), db_path, image_dir, work_dir, opts, links=joins)
     elif options.mapper == "global":
         if use_priors:
             raise LBurstValueError("position priors need the incremental mapper (--mapper incremental)")
@@ -586,8 +595,11 @@ def run_job(job_dir: str | Path) -> dict:
         )
     mapping = time.perf_counter()
     priors = job.positions is not None and any(p is not None for p in job.positions)
+    joins: list[dict] = []
     rec = (
-        map_database(db_path, job.image_dir, job_dir / "mapper", job.options, stages, priors) if len(v_pairs) else None
+        map_database(db_path, job.image_dir, job_dir / "mapper", job.options, stages, priors, joins)
+        if len(v_pairs)
+        else None
     )
     mapped = time.perf_counter()
     alignment = align_to_priors(rec, job.names, job.positions) if rec is not None and priors else None
@@ -595,6 +607,8 @@ def run_job(job_dir: str | Path) -> dict:
         with stages.stage("export"):
             export_model(rec, job_dir)
     summary = summarize(rec)
+    if rec is not None:  # what lburst.sfm.trust.assess reads besides the summary
+        summary.update(model_measures(rec, job.names), joins=joins)
     summary["prior_alignment"] = alignment
     summary["first_last_points3D"] = shared_points3D(rec, job.names[0], job.names[-1])
     summary.update(verify_seconds=round(verified - start, 3), map_seconds=round(mapped - mapping, 3))

@@ -196,6 +196,7 @@ def join_models(
     max_reprojection_error: float = 4.0,
     max_misfit: float = 0.1,
     rounds: int = 3,
+    links: list[dict] | None = None,
 ) -> pycolmap.Reconstruction:
     """The largest model, joined with every other model that shares at least two registered images with it.
 
@@ -213,6 +214,8 @@ def join_models(
         max_reprojection_error: largest mean reprojection error (px) of the joined model.
         max_misfit: see :func:`sim3_from_shared_images`.
         rounds: most rounds of :func:`refine`.
+        links: when given, receives for each join of the returned model how it holds
+            (:func:`join_links`: its new images and the 3D points they share with the rest).
 
     Returns:
         the joined model; the largest model itself (unchanged) when no model could be
@@ -224,7 +227,7 @@ def join_models(
         raise LBurstValueError("no model to join")
     largest, others = models[0], models[1:]
     joined = pycolmap.Reconstruction(largest)
-    joins = []
+    joins, added_frames = [], []
     while others:
         shared = [shared_images(joined, rec) for rec in others]
         best = int(np.argmax([len(ids) for ids in shared]))
@@ -236,6 +239,7 @@ def join_models(
         if sim is None or not (added := add_frames(joined, rec, sim)):
             continue
         joins.append(f"a model of {rec.num_reg_images()} images ({len(added)} new) through {', '.join(names)}")
+        added_frames.append(added)
     if not joins:
         if len(models) > 1:
             log.info("kept the largest of %d models: no other could be aligned to it", len(models))
@@ -256,4 +260,21 @@ def join_models(
         joined.num_points3D(),
         error,
     )
+    if keep and links is not None:
+        links.extend(join_links(joined, added_frames))
     return joined if keep else largest
+
+
+def join_links(rec: pycolmap.Reconstruction, added: list[list[int]]) -> list[dict]:
+    """For each join, the frames it ``added`` to ``rec``: how many images (``images``) and
+    how many 3D points have images both among them and among the others (``points``): how
+    firmly the join holds (a fold hangs on a handful)."""
+    out = []
+    for frames in added:
+        ids = {data.id for frame_id in frames for data in rec.frames[frame_id].image_ids}
+        points = 0
+        for point in rec.points3D.values():
+            inside = {element.image_id in ids for element in point.track.elements}
+            points += inside == {True, False}
+        out.append({"images": len(ids), "points": points})
+    return out

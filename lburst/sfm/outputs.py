@@ -23,7 +23,8 @@ same files in the output folder ``OUT``:
   ``model.las`` and ``cameras.geojson`` in the fixes' UTM zone and WGS 84
   (:mod:`lburst.geo.outputs`), the model and ``trajectory.tum`` in metres east, north and up
   of the first fix;
-- ``report.md`` with ``trajectory.png`` (top-down, Sim3-aligned to the ground truth
+- ``report.md`` with the model's checks (:mod:`lburst.sfm.trust`: whether it shows the signs of a
+  folded model), ``trajectory.png`` (top-down, Sim3-aligned to the ground truth
   when there is one) and ``registration.png`` (3D points per image; grey: not
   registered), the 3D points the first and last images share (a closed loop ties them),
   and a table of every image.
@@ -43,6 +44,7 @@ from lburst.sfm.poses import umeyama
 from lburst.sfm.positions import describe
 from lburst.sfm.reference import Reference
 from lburst.sfm.result import ReconstructionResult, Status
+from lburst.sfm.trust import describe_checks
 from lburst.tum import write_tum
 
 IMAGES = "images"  # OUT/images: the common frames, named as in features.h5 and COLMAP
@@ -219,6 +221,8 @@ def write_report(result: ReconstructionResult, times: dict[str, float], path: Pa
         lines.append(f"Camera: {m['camera']}.")
     if result.positions:
         lines += ["", *(f"- {line}" for line in describe(result.positions)), ""]
+    if result.checks is not None:
+        lines += ["", f"**Checks** ({'passed' if result.trusted else 'failed'}): {describe_checks(result.checks)}.", ""]
     if "ate_rmse" in m:
         lines.append(
             f"ATE {m['ate_rmse']:.4f} m RMSE ({m.get('ate_percent', float('nan')):.3f} % of the path) "

@@ -47,6 +47,7 @@ from lburst.sfm.positions import Priors, file_priors, parse_positions, prior_fit
 from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionResult, Status, ended
 from lburst.sfm.retrieval import retrieval_pairs, vlad
 from lburst.sfm.scene import SceneError
+from lburst.sfm.trust import assess
 
 __all__ = [
     "RESULT_FILE",
@@ -95,6 +96,15 @@ def _georeferenced(out: Path, origin: GeoOrigin, result: ReconstructionResult) -
     except MissingExtra as err:
         result.positions["notes"].append(f"no LAS point cloud or GeoJSON cameras: {err}")
         return None
+
+
+def _checks(summary: dict, names: list[str], ordered: bool, priors, result, opts: ReconstructOptions) -> dict:
+    """Whether the model can be trusted (:func:`lburst.sfm.trust.assess`); the positions count
+    where they placed the model."""
+    placed = None
+    if priors is not None and result.positions and result.positions.get("in_frame"):
+        placed = {n: c for n, c in zip(names, priors.centres) if not np.isnan(c).any()}
+    return assess(summary, names, ordered, placed, opts.position_std)
 
 
 def _reconstruct(
@@ -243,6 +253,8 @@ def _reconstruct(
         if result.positions["in_frame"] and priors.origin is not None and not colmap_error:
             result.positions["georeferenced"] = _georeferenced(out, priors.origin, result)
     result.metrics.update(camera_metrics(result.cameras))
+    if result.converged and not colmap_error:
+        result.checks = _checks(summary, scene.names, source.time_ordered or mode == "sequential", priors, result, opts)
     if scene.reference_path is not None and not colmap_error:
         result.metrics.update(evaluate_against_reference(result, scene.reference_path))
     result.status, result.error = ended(colmap_error, source_error, result.converged)

@@ -47,6 +47,9 @@ class ReconstructionResult:
         positions: what the position priors did (:func:`lburst.sfm.positions.prior_fit`:
             their source, count and origin, how far the model lies from them), ``None``
             without priors.
+        checks: whether the model can be trusted without ground truth
+            (:func:`lburst.sfm.trust.assess`: ``trusted``, the ``reasons`` when not, and the
+            ``measures``), ``None`` without a model.
         status: how it ended (:class:`Status`).
         error: why COLMAP failed or the recording stopped early (both when both), or ``None``.
     """
@@ -60,12 +63,18 @@ class ReconstructionResult:
     cameras: dict[str, dict] = field(default_factory=dict)
     metrics: dict[str, float | int | str | None] = field(default_factory=dict)
     positions: dict | None = None
+    checks: dict | None = None
     status: Status = Status.NO_MODEL
     error: str | None = None
 
     @property
     def converged(self) -> bool:
         return bool(self.metrics.get("converged"))
+
+    @property
+    def trusted(self) -> bool:
+        """A model that passed its checks (:attr:`checks`); ``False`` without a model."""
+        return bool(self.checks and self.checks.get("trusted"))
 
     @property
     def failed(self) -> bool:
