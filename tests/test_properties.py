@@ -46,6 +46,7 @@ def test_any_file_bytes_load_or_raise_a_burst_error(tmp_path_factory, data, suff
     image=hnp.arrays(st.sampled_from([np.uint8, np.uint16]), st.tuples(st.integers(1, 40), st.integers(1, 40))),
     keep=st.floats(0.05, 1.0),
 )
+@example(image=np.zeros((1, 1), np.uint8), keep=0.25).via("a PNG cut inside its IHDR chunk")
 def test_truncated_encodings_never_load_as_a_partial_frame(tmp_path_factory, image, keep):
     folder = tmp_path_factory.mktemp("enc")
     for suffix in (".png", ".jpg"):

@@ -189,7 +189,7 @@ def header_size(path: str | Path) -> tuple[int, int] | None:
             head = f.read(24)
     except OSError:
         return None
-    if head[:8] == _PNG_SIGNATURE and head[12:16] == b"IHDR":
+    if len(head) == 24 and head[:8] == _PNG_SIGNATURE and head[12:16] == b"IHDR":  # one cut inside it: OpenCV decides
         width, height = struct.unpack(">II", head[16:24])
         return int(width), int(height)
     try:
