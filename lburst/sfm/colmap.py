@@ -437,7 +437,7 @@ def map_database(
             registered = 0 if best is None else best.num_reg_images()
             label = f", again: {registered} of {total} images registered, seed {run.seed}"
         links: list[dict] = []
-        model = _map_once(db_path, image_dir, folder, run, stages, use_priors, label, links)
+        model = _map_once(db_path, image_dir, folder, run, stages, use_priors, label, joins=links)
         if model is not None and (best is None or _size(model) > _size(best)):
             best, best_joins = model, links
         if best is not None and best.num_reg_images() >= total:

@@ -185,9 +185,16 @@ def test_join_models_through_two_shared_images(database, tmp_path, from_disk, ca
         assert a.num_images() == 6
     opts = pycolmap.IncrementalPipelineOptions()
     opts.num_threads = 1
+    links = []
     with caplog.at_level(logging.INFO, logger="lburst.sfm.join"):
-        joined = join_models({0: a, 1: b}.values(), db_path, root / "images", tmp_path, opts)
+        joined = join_models({0: a, 1: b}.values(), db_path, root / "images", tmp_path, opts, links=links)
     assert "joined the largest model (6 images)" in caplog.text and "k04.png, k07.png" in caplog.text
+    # the join: 2 new images, tied to the 6 others by the points they share with them
+    new = {joined.find_image_with_name(n).image_id for n in ("k05.png", "k06.png")}
+    spanning = sum(
+        {e.image_id in new for e in point.track.elements} == {True, False} for point in joined.points3D.values()
+    )
+    assert links == [{"images": 2, "points": spanning}] and spanning > 100
     assert joined is not a and joined.num_reg_images() == 8
     assert a.num_reg_images() == b.num_reg_images() + 2 == 6  # the input models are not changed
     names = [f"k{i:02d}.png" for i in range(8)]

@@ -158,15 +158,18 @@ def test_the_mapper_runs_again_while_images_stay_unregistered(tmp_path, monkeypa
     runs = {0: Model(2, 50), 10007: Model(2, 80), 20014: Model(3, 10), 30021: Model(3, 99)}
     seeds = []
 
-    def one_run(db, images, folder, options, stages, use_priors, label=""):
+    def one_run(db, images, folder, options, stages, use_priors, label="", joins=None):
         seeds.append((options.seed, folder.name))
+        joins.append({"images": options.seed, "points": 40})  # how the joins of this attempt's model hold
         return runs[options.seed]
 
     monkeypatch.setattr(colmap, "_map_once", one_run)
+    joins = []
     best = colmap.map_database(
-        tmp_path / "database.db", tmp_path, tmp_path / "sparse", ColmapOptions(mapper_attempts=4)
+        tmp_path / "database.db", tmp_path, tmp_path / "sparse", ColmapOptions(mapper_attempts=4), joins=joins
     )
     assert best is runs[20014]  # every image registered: no fourth attempt
+    assert joins == [{"images": 20014, "points": 40}]  # the joins of the model kept, not of the others
     assert seeds == [(0, "sparse"), (10007, "attempt1"), (20014, "attempt2")]
     seeds.clear()
     best = colmap.map_database(
