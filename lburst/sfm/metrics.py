@@ -32,6 +32,10 @@ Definitions (N = images in the scene, sums over the matched pairs of the final r
   bundle adjustment (``k`` of ``SIMPLE_RADIAL``, ``k1`` of ``RADIAL`` and ``OPENCV``; absent for a
   model without one, such as ``PINHOLE``).
 - ``points3D``: 3D points of the largest model.
+- ``frame_rmse``, ``frame_max``, ``frame_yaw_deg`` (with a reference, for a model placed in the
+  frame of its GNSS positions): camera centres against the reference's after only a rotation
+  about the vertical and a shift, no scale (:func:`lburst.sfm.poses.yaw_shift_errors`): how far
+  a georeferenced model lies from the truth in metres.
 
 Averages over scenes are plain means of the per-scene values; a scene that did not
 converge contributes 0 registered images and 0 points, and no trajectory error
@@ -47,7 +51,15 @@ import numpy as np
 
 from lburst.burst.io import file_sha1
 from lburst.sfm.colmap import pycolmap
-from lburst.sfm.poses import AUC_DEG, path_length, pose_auc, relative_pose_errors, trajectory_errors
+from lburst.sfm.poses import (
+    AUC_DEG,
+    camera_to_world,
+    path_length,
+    pose_auc,
+    relative_pose_errors,
+    trajectory_errors,
+    yaw_shift_errors,
+)
 from lburst.sfm.reference import Reference
 from lburst.sfm.scene import reference_cameras
 
@@ -244,6 +256,14 @@ def evaluate_against_reference(
         except ValueError:
             errors = {}
         out.update(errors)
+        positions = getattr(result, "positions", None) or {}
+        if positions.get("in_frame"):  # the model is in the GNSS frame: how far, with no scale fitted
+            out.update(
+                yaw_shift_errors(
+                    np.array([camera_to_world(result.poses[n])[:3, 3] for n in common]),
+                    np.array([camera_to_world(reference.poses[n])[:3, 3] for n in common]),
+                )
+            )
     return out
 
 

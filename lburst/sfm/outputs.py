@@ -228,6 +228,11 @@ def write_report(result: ReconstructionResult, times: dict[str, float], path: Pa
             f"ATE {m['ate_rmse']:.4f} m RMSE ({m.get('ate_percent', float('nan')):.3f} % of the path) "
             "after a Sim3 alignment to the ground truth."
         )
+    if "frame_rmse" in m:
+        lines.append(
+            f"In the GNSS frame: camera centres {m['frame_rmse']:.3f} m RMS (max {m['frame_max']:.3f} m) from the "
+            f"ground truth after only a rotation about the vertical ({m['frame_yaw_deg']:.2f} deg) and a shift, no scale."
+        )
     if m.get("first_last_points3D") is not None:
         lines.append(
             f"The first and last keyframes share {m['first_last_points3D']} 3D points of the model "

@@ -157,6 +157,24 @@ def trajectory_errors(
     return out
 
 
+def yaw_shift_errors(estimated: np.ndarray, reference: np.ndarray) -> dict[str, float]:
+    """Errors of camera centres ``estimated`` (N, 3) that should already be in ``reference``'s
+    metric, z-up frame (a model georeferenced by GNSS): after only the rotation about z and the
+    shift that best take one onto the other (least squares: a 2-D Procrustes on x, y and the
+    mean difference on z), with no scale fitted.  Returns ``frame_rmse``, ``frame_max`` (metres)
+    and ``frame_yaw_deg`` (the rotation that was needed)."""
+    a, b = estimated - estimated.mean(0), reference - reference.mean(0)
+    angle = float(np.arctan2((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a[:, :2] * b[:, :2]).sum()))
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    errors = np.linalg.norm(a @ rot.T - b, axis=1)
+    return {
+        "frame_rmse": float(np.sqrt(np.mean(errors**2))),
+        "frame_max": float(errors.max()),
+        "frame_yaw_deg": float(np.degrees(angle)),
+    }
+
+
 def path_length(centres: np.ndarray) -> float:
     """Length of the polyline through camera centres (N, 3) in order."""
     c = np.asarray(centres, dtype=np.float64)

@@ -2,6 +2,9 @@
 
 import json
 
+import numpy as np
+import pytest
+
 from lburst.bench.reconstruction import run_benchmark
 from lburst.methods import method_slug
 from lburst.methods.learned import results_key
@@ -243,3 +246,29 @@ def test_benchmark_skips_a_finished_learned_run_whose_spec_got_the_scenes_keypoi
     (out / KEY_FILE).write_text(json.dumps(run_key(scene, {"num_threads": 1})))
     row = run_benchmark([scene], ["lburst"], tmp_path / "bench", progress=False, num_threads=1)["rows"][0]
     assert row["registered_pct"] == 42.0 and row["registered"] == 2  # taken as finished, not run again
+
+
+def _placed(positions):
+    """A reconstruction of four cameras 2 m above their true places, the reference, and ``positions``."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from lburst.sfm.reference import Reference
+
+    centres = {f"{i:04d}": np.array([10.0 * i, 3.0 * (i % 2), 0.0]) for i in range(4)}
+    truth = {n: (np.eye(3), -c) for n, c in centres.items()}
+    model = {n: (np.eye(3), -(c + [0.0, 0.0, 2.0 * (n == "0003")])) for n, c in centres.items()}
+    reference = Reference(source="synthetic", camera={}, poses=truth)
+    result = SimpleNamespace(names=list(centres), poses=model, positions=positions, match_data=lambda: None)
+    return result, reference
+
+
+def test_a_model_in_the_gnss_frame_is_measured_there_too():
+    from lburst.sfm.metrics import evaluate_against_reference
+
+    metrics = evaluate_against_reference(*_placed({"in_frame": True}))
+    assert metrics["frame_rmse"] == pytest.approx(np.sqrt((3 * 0.5**2 + 1.5**2) / 4))
+    assert metrics["frame_max"] == pytest.approx(1.5)
+    for positions in (None, {"in_frame": False}):  # a model in COLMAP's own frame has no such error
+        assert "frame_rmse" not in evaluate_against_reference(*_placed(positions))

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs, sequential_pairs
-from lburst.sfm.poses import Sim3, centre_errors, trajectory_errors, umeyama
+from lburst.sfm.poses import Sim3, centre_errors, trajectory_errors, umeyama, yaw_shift_errors
 
 SQUARE = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
 
@@ -95,3 +95,28 @@ def test_pairs():
     assert len(make_pairs(30, "sequential", 5)) == 5 * 30 - 15
     with pytest.raises(ValueError):
         make_pairs(3, "nearest")
+
+
+def test_a_georeferenced_model_is_measured_after_a_yaw_and_a_shift_only():
+    rng = np.random.default_rng(7)
+    truth = rng.normal(scale=20.0, size=(12, 3))
+    yaw = Rotation.from_euler("z", 0.4).as_matrix()
+    moved = truth @ yaw.T + np.array([3.0, -8.0, 1.5])
+    err = yaw_shift_errors(moved, truth)
+    assert err["frame_rmse"] == pytest.approx(0, abs=1e-9)
+    assert err["frame_yaw_deg"] == pytest.approx(-np.degrees(0.4))
+    # a scale error is not fitted away, nor a tilt: both stay in the error
+    scaled = yaw_shift_errors(1.1 * truth, truth)
+    spread = truth - truth.mean(0)
+    assert scaled["frame_rmse"] == pytest.approx(0.1 * np.sqrt(np.mean(np.sum(spread**2, 1))), rel=1e-9)
+    tilt = Rotation.from_euler("x", 0.1).as_matrix()
+    assert yaw_shift_errors(truth @ tilt.T, truth)["frame_rmse"] > 0.5
+
+
+def test_a_known_offset_of_one_camera():
+    truth = np.array([[0.0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0]])
+    moved = truth.copy()
+    moved[:, 2] = [0.0, 0.0, 0.0, 4.0]  # one camera 4 m up: the shift takes 1 m, errors 1, 1, 1, 3
+    err = yaw_shift_errors(moved, truth)
+    assert err["frame_rmse"] == pytest.approx(np.sqrt(12 / 4))
+    assert err["frame_max"] == pytest.approx(3.0)
