@@ -33,13 +33,6 @@ def as_floats(value: str | tuple | list, count: int | None = None) -> tuple[floa
     return values
 
 
-def check_known(options: dict, known: set[str], method: str) -> None:
-    """Raise ``ValueError`` naming any option not in ``known``."""
-    unknown = set(options) - known
-    if unknown:
-        raise LBurstValueError(f"unknown options {sorted(unknown)} for method {method!r}; known: {sorted(known)}")
-
-
 # --- typed method options -------------------------------------------------------------
 #
 # Each method declares its options as a dataclass; a spec string's ``KEY=VALUE`` pairs

@@ -68,13 +68,6 @@ def match_pairs_with_scores(
     return [m for m, _ in found], [s for _, s in found]
 
 
-def match_pairs(
-    features: list[Features], pairs: list[tuple[int, int]], progress: bool = True, matcher: str = "mnn"
-) -> list[np.ndarray]:
-    """Matches (M, 2) of each pair, by the matcher spec ``matcher`` (mutual nearest neighbours by default)."""
-    return match_pairs_with_scores(features, pairs, progress, matcher)[0]
-
-
 def feature_keys(folder: Path, names: list[str]) -> list[dict | None]:
     """The store's key (:mod:`lburst.store`: what made the features) of each image's
     ``folder/<name>.npz`` (``None``: not there, or written without one)."""
