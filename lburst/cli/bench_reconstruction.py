@@ -10,6 +10,7 @@ from lburst.burst.io import atomic_path
 from lburst.cli.numbers import integer
 from lburst.cli.options import add_matcher_argument
 from lburst.scenes.reference_spread import summary
+from lburst.sfm.colmap import DEFAULT_THREADS
 from lburst.sfm.metrics import markdown_table, seed_table
 from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
 
@@ -50,7 +51,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         const=True,
         help="one camera for all images of a scene (a recording has one by default)",
     )
-    parser.add_argument("--threads", type=integer(1, 1024), default=2)
+    parser.add_argument("--threads", type=integer(1, 1024), default=DEFAULT_THREADS)
     parser.add_argument(
         "--seeds",
         nargs="+",

@@ -10,6 +10,7 @@ from lburst.cli.numbers import integer, real
 from lburst.cli.options import add_cluster_argument, add_matcher_argument, add_recording_arguments, recording_options
 from lburst.errors import RunFailed
 from lburst.methods import check
+from lburst.sfm.colmap import DEFAULT_THREADS
 from lburst.sfm.metrics import markdown_table
 from lburst.sfm.options import (
     AUTO_EXHAUSTIVE_MAX,
@@ -118,7 +119,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="one camera per image (the default for a scene of bursts or photos)",
     )
     parser.add_argument("--fix-intrinsics", action="store_true", help="do not refine the intrinsics")
-    parser.add_argument("--threads", type=integer(1, 1024), default=2)
+    parser.add_argument("--threads", type=integer(1, 1024), default=DEFAULT_THREADS)
     parser.add_argument(
         "--mapper-threads",
         type=integer(1, 1024),

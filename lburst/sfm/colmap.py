@@ -140,13 +140,18 @@ class ColmapError(LBurstError, RuntimeError):
     """COLMAP failed (or aborted); the message says how, with the end of its log."""
 
 
+#: threads of COLMAP's verification and mapping, and of ``lburst reconstruct`` and ``lburst bench
+#: reconstruction``, unless given (a shared machine; a run is repeatable for one thread count)
+DEFAULT_THREADS = 2
+
+
 @dataclass
 class ColmapOptions:
     """Verification and mapping settings (COLMAP defaults unless noted).
 
     Attributes:
         mapper: ``'incremental'`` (COLMAP) or ``'global'`` (GLOMAP, built into pycolmap 4.x).
-        num_threads: threads for verification and mapping (2 here, a shared machine).
+        num_threads: threads for verification and mapping (:data:`DEFAULT_THREADS`).
         seed: seed of RANSAC and of the mapper (runs are repeatable).
         min_num_inliers: fewest inliers for a verified pair (COLMAP: 15).
         max_error: RANSAC epipolar error threshold in pixels (COLMAP: 4).
@@ -182,7 +187,7 @@ class ColmapOptions:
     """
 
     mapper: str = "incremental"
-    num_threads: int = 2
+    num_threads: int = DEFAULT_THREADS
     seed: int = 0
     min_num_inliers: int = 15
     max_error: float = 4.0

@@ -10,6 +10,7 @@ from pathlib import Path
 from lburst.burst.sources import RecordingOptions
 from lburst.cluster.spec import ClusterSpec, parse_cluster
 from lburst.errors import LBurstValueError
+from lburst.sfm.colmap import DEFAULT_THREADS
 from lburst.sfm.positions import DEFAULT_STD_M, check_std
 from lburst.strenum import StrEnum
 
@@ -124,7 +125,7 @@ class ReconstructOptions:
     single_camera: bool | None = None
     fix_intrinsics: bool = False
     mapper: Mapper = Mapper.INCREMENTAL
-    num_threads: int = 2
+    num_threads: int = DEFAULT_THREADS
     seed: int = 0
     progress: bool = True
     extra: dict[str, int | float | bool | str] = field(default_factory=dict)
