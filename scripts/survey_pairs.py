@@ -23,8 +23,8 @@ import numpy as np
 
 def cross_line_pairs(survey: Path, run: Path) -> dict:
     from lburst.burst.io import read_features_npz
-    from lburst.scenes.reference import Reference
     from lburst.sfm.metrics import epipolar_distances
+    from lburst.sfm.reference import Reference
 
     lines = json.loads((survey / "survey.json").read_text())
     ref = Reference.load(survey / "reference.json")

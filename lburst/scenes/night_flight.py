@@ -17,7 +17,7 @@ path and down, ``pitch_deg`` from nadir, with a small deterministic attitude wob
 ``i * burst_spacing / speed``; its frame ``k`` (0-based, of ``frames_per_burst``) is
 rendered from the pose at ``(k - mid) * frame_interval`` seconds later, so the frames of
 a burst see the scene with real parallax, and the middle frame is the common frame whose
-pose goes into ``reference.json`` (see :mod:`lburst.scenes.reference` for conventions).
+pose goes into ``reference.json`` (see :mod:`lburst.sfm.reference` for conventions).
 
 Scene folder written by :func:`make_night_flight`::
 
@@ -46,7 +46,7 @@ from lburst.noise import noise_from_spec
 from lburst.numbers import check_integer, check_real
 from lburst.scenes.city import DAYLIGHT, City, CityConfig, build_city, shade
 from lburst.scenes.raycast import cast, intrinsics, rays_through
-from lburst.scenes.reference import Reference
+from lburst.sfm.reference import Reference
 
 CONFIG_FILE = "night_flight.json"
 SURVEY_FILE = "survey.json"

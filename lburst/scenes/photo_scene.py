@@ -45,12 +45,12 @@ from tqdm import tqdm
 
 from lburst.burst.io import atomic_path, frame_name, save_burst
 from lburst.noise import noise_from_spec
-from lburst.scenes.reference import Reference
 from lburst.scenes.reference_spread import drop_spread, reference_spread
 from lburst.scenes.strecha import CAMERAS_DIR, cameras_folder, save_strecha_reference
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.poses import path_length
 from lburst.sfm.reconstruct import reconstruct_scene
+from lburst.sfm.reference import Reference
 from lburst.sfm.scene import SceneError, list_scene, read_image, save_reference
 from lburst.simulate import random_motion, simulate_burst, stable_seed
 

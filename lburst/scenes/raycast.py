@@ -1,6 +1,6 @@
 """Vectorised ray casting against a ground plane ``z = 0`` and axis-aligned boxes.
 
-Conventions (COLMAP's, as in :mod:`lburst.scenes.reference`): world z is up; a camera
+Conventions (COLMAP's, as in :mod:`lburst.sfm.reference`): world z is up; a camera
 ``(K, R, t)`` maps ``x_cam = R @ x_world + t`` and looks along +z with x right, y down;
 pixel ``(row i, column j)`` has its centre at image coordinates ``(j + 0.5, i + 0.5)``.
 """

@@ -74,8 +74,8 @@ def test_simulate_flight_takes_out_as_an_option(tmp_path):
     )
     assert (tmp_path / "scene" / "reference.json").is_file()
     # and a receiver's log of the same cameras, 2 m of noise by default, for --positions
-    from lburst.scenes.reference import Reference
     from lburst.sfm.positions import parse_positions
+    from lburst.sfm.reference import Reference
 
     logged = parse_positions(tmp_path / "scene" / "positions.txt")
     truth = {name: -R.T @ t for name, (R, t) in Reference.load(tmp_path / "scene" / "reference.json").poses.items()}

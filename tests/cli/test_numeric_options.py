@@ -192,7 +192,7 @@ def test_the_reference_reader_accepts_exactly_finite_rotations_and_positive_foca
 
     from scipy.spatial.transform import Rotation
 
-    from lburst.scenes.reference import Reference
+    from lburst.sfm.reference import Reference
 
     R = Rotation.from_rotvec(angles).as_matrix()
     R = {"scaled": 1.5 * R, "mirrored": -R, "nan": R + np.nan, "inf": R + np.inf}.get(kind, R)

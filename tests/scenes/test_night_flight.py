@@ -13,8 +13,8 @@ from lburst.cli import simulate_flight as flight_command
 from lburst.scenes import night_flight as nf
 from lburst.scenes.city import BUILDING, City, CityConfig
 from lburst.scenes.raycast import intrinsics
-from lburst.scenes.reference import Reference
 from lburst.scenes.textures import MipTexture
+from lburst.sfm.reference import Reference
 
 RED, BLUE, GREY = (255.0, 0.0, 0.0), (0.0, 0.0, 255.0), (100.0, 100.0, 100.0)
 # small images and a coarse ground texture keep the tests fast

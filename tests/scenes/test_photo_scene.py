@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from lburst.scenes.photo_scene import REFERENCE_SOURCE, simulate_scene
-from lburst.scenes.reference import Reference
 from lburst.sfm.poses import trajectory_errors
+from lburst.sfm.reference import Reference
 from lburst.sfm.scene import reference_cameras
 
 

@@ -8,9 +8,9 @@ from scipy.spatial.transform import Rotation
 
 from lburst.bench.reconstruction import run_benchmark
 from lburst.methods import method_slug
-from lburst.scenes.reference import Reference
 from lburst.sfm.metrics import camera_metrics, evaluate_against_reference, seed_summary
 from lburst.sfm.poses import pose_auc, relative_pose_errors, trajectory_errors
+from lburst.sfm.reference import Reference
 from lburst.sfm.result import ReconstructionResult
 
 NAMES = ["a", "b", "c", "d"]

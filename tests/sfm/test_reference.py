@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from lburst.scenes.reference import Reference
+from lburst.sfm.reference import Reference
 
 
 def make_reference() -> Reference:

@@ -39,7 +39,7 @@ def test_sift_registers_a_synthetic_flight(flight, tmp_path):
     # result.json round-trips and re-evaluates to the same numbers
     again = ReconstructionResult.load(tmp_path / "out" / "result.json")
     assert again.registered == result.registered
-    from lburst.scenes.reference import Reference
+    from lburst.sfm.reference import Reference
 
     ref = evaluate_against_reference(again, Reference.load(flight / "reference.json"))
     assert ref["ate_rmse"] == pytest.approx(m["ate_rmse"])
