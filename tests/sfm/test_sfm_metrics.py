@@ -66,7 +66,7 @@ def test_method_slug_is_a_safe_unique_name():
 def test_benchmark_evaluates_again_when_the_reference_is_remade(tmp_path):
     import numpy as np
 
-    from lburst.scenes.reference import Reference
+    from lburst.sfm.reference import Reference
 
     scene = tmp_path / "scene"
     scene.mkdir()
@@ -178,7 +178,7 @@ def test_benchmark_reports_the_reference_spread_of_its_current_reference(tmp_pat
     import numpy as np
 
     from lburst.burst.io import file_sha1
-    from lburst.scenes.reference import Reference
+    from lburst.sfm.reference import Reference
 
     scene = tmp_path / "scene"
     (scene / ".reference").mkdir(parents=True)
