@@ -172,18 +172,17 @@ class ColmapOptions:
             are two-view; without them too few points hold the scale and the trajectory
             can shrink along the chain.
         mapper_threads: threads of the mapper; ``None``: ``num_threads``.  Only one thread
-            makes incremental mapping repeatable: with two, the same verified pairs of the
-            moonless DNG flight mapped to ATE 0.18 % in one run and 10.6 % in two others.
+            makes incremental mapping repeatable (docs/recordings.md).
         join_models: when incremental mapping splits the images into several models, join
             to the largest those sharing at least two registered images with it
             (:func:`lburst.sfm.join.join_models`: a similarity from the shared camera poses,
             then triangulation and bundle adjustment); the largest model alone is kept
-            when the joined one is worse.  (The mapper split a dark looping flight into two
-            models that shared two images and too few 3D points for COLMAP's alignments.)
+            when the joined one is worse (a dark looping flight can split into two models that
+            share too few 3D points for COLMAP's own alignments).
         mapper_attempts: most runs of the mapper while its model leaves images unregistered
-            (:func:`map_database`).  With one camera per photo, whose focal length and
-            distortion the mapper must find, the ten-photo sacre_coeur scene at σ 50 kept 2-4 of
-            its 10 images in three of five seeds of one run (docs/results.md).
+            (:func:`map_database`): with one camera per photo, whose focal length and
+            distortion the mapper must find, a first model of a small photo set can keep only a
+            few of its images (docs/results/reconstruction.md).
     """
 
     mapper: str = "incremental"

@@ -87,8 +87,7 @@ class TrainConfig:
     ``ap_weight`` adds ``ap_weight * (1 - AP)`` to the loss.  R2D2's reliability loss
     trains descriptors only through ``AP * rel``: when AP starts below the base (0.5),
     as it does under heavy noise, reliability collapses to 0 and descriptors stop
-    learning (seen here: a single-image run stuck at AP 0.08 for 13k steps, a burst run
-    stuck until step 7.6k).  The unweighted term keeps them learning; 0 is the paper.
+    learning (docs/training.md).  The unweighted term keeps them learning; 0 is the paper.
 
     ``rel_logit_weight`` adds ``rel_logit_weight * logit_margin_loss(z, rel_logit_margin)``
     on the reliability logits ``z`` of both bursts (:func:`lburst.train.losses.logit_margin_loss`):
@@ -101,11 +100,9 @@ class TrainConfig:
     base keeps pixels whose descriptors still match under that noise.
 
     ``ap_border`` (pixels): the reliability loss takes no query pixel this close to the
-    border of burst A (R2D2's 16).  Reliability there is then never trained, and
-    lburst-b5 learnt to give its outer 32 pixels a low one (mean 0.31-0.45 against 0.68
-    inside; the published model's 0.48-0.54), so its keypoints avoid the image borders,
-    where they would pin down the camera's distortion.  0 trains every pixel whose target
-    lies inside burst B.
+    border of burst A (R2D2's 16).  Reliability there is then never trained, so keypoints
+    avoid the image borders, where they would pin down the camera's distortion
+    (docs/results/border.md).  0 trains every pixel whose target lies inside burst B.
 
     ``snapshot_every`` (steps) also keeps the weights at every multiple of it as
     ``snapshots/step_XXXXXX.pt`` in the published layout (a few MB each), so the
@@ -114,9 +111,8 @@ class TrainConfig:
     ``ema_decay`` above 0 also keeps an exponential moving average of the weights
     (:class:`torch.optim.swa_utils.AveragedModel`, buffers included), updated after every
     step: ``w_ema <- ema_decay * w_ema + (1 - ema_decay) * w``, over about
-    ``1 / (1 - ema_decay)`` steps.  A fine-tune's snapshots a hundred steps apart differ by
-    several points of MMA and a third of their keypoints; the average is meant to keep what
-    the steps agree on.  Each snapshot then also writes ``step_XXXXXX.ema.pt``, ``final.pt``
+    ``1 / (1 - ema_decay)`` steps, to keep what neighbouring steps agree on.  Each snapshot
+    then also writes ``step_XXXXXX.ema.pt``, ``final.pt``
     holds the average, and ``last.pt`` keeps it for a resume.  0 (the default) keeps none.
 
     ``distill_weight`` adds ``distill_weight * distillation_loss``: the network on burst A
@@ -151,8 +147,8 @@ class TrainConfig:
     ``tensorboard`` also writes the losses for TensorBoard to ``tensorboard/`` in the run.
 
     ``precision`` ``'bf16'`` (or ``'fp16'`` on a GPU) runs the network's forward pass under
-    autocast; the losses are computed in fp32 from its outputs (1.4-1.7x faster steps on a
-    CPU with AVX512-BF16; the first 428 steps' loss curve matched fp32's, see the README)."""
+    autocast; the losses are computed in fp32 from its outputs (its speed and its loss curve
+    against fp32's: docs/training.md)."""
 
     frames: int = 5
     batch_size: int = 4
