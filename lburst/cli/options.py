@@ -96,17 +96,17 @@ def add_matcher_argument(parser) -> None:
     )
 
 
-def add_color_jitter_argument(parser, help: str, default: tuple[float, ...] | None = None) -> None:
-    """``--color-jitter BRIGHTNESS CONTRAST SATURATION HUE``, four numbers in [0, 1]
-    (:func:`lburst.photometric.color_jitter`), for training and the homography benchmark."""
-    parser.add_argument(
-        "--color-jitter",
-        type=real(0, 1),
-        nargs=4,
-        default=default,
-        metavar=("BRIGHTNESS", "CONTRAST", "SATURATION", "HUE"),
-        help=help,
+def color_jitter_kwargs(help: str, default: tuple[float, ...] | None = None) -> dict:
+    """``add_argument``'s keywords of ``--color-jitter BRIGHTNESS CONTRAST SATURATION HUE``, four
+    numbers in [0, 1] (:func:`lburst.photometric.color_jitter`), for training and the homography benchmark."""
+    return dict(
+        type=real(0, 1), nargs=4, default=default, metavar=("BRIGHTNESS", "CONTRAST", "SATURATION", "HUE"), help=help
     )
+
+
+def add_color_jitter_argument(parser, help: str, default: tuple[float, ...] | None = None) -> None:
+    """``--color-jitter`` (:func:`color_jitter_kwargs`) on ``parser``."""
+    parser.add_argument("--color-jitter", **color_jitter_kwargs(help, default))
 
 
 def add_cluster_argument(p, what: str) -> None:

@@ -10,12 +10,239 @@ from dataclasses import fields, replace
 from pathlib import Path
 
 from lburst.cli.numbers import integer, real
-from lburst.cli.options import add_color_jitter_argument
+from lburst.cli.options import color_jitter_kwargs
+from lburst.cli.table import Option, add_options, given, optional_tuple, true_or_none
 from lburst.errors import LBurstValueError
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.paths import shared_dir
 from lburst.train.loop import PRESETS, TEACHER_INPUTS, TrainConfig, check_resume_options, saved_run_length, train
 from lburst.train.pairs import SENSOR_MIX, PairConfig
+
+#: the options that set a :class:`TrainConfig` field (:func:`given_options`), in --help's order
+TRAIN_OPTIONS = (
+    Option("--frames", "frames", dict(type=integer(1, 99), help="burst length N (1 = single-image network)")),
+    Option("--steps", "steps", dict(type=integer(1))),
+    Option("--batch-size", "batch_size", dict(type=integer(1, 512))),
+    Option(
+        "--time-budget",
+        "time_budget_s",
+        dict(type=real(0, low_open=True), help="stop (resumably) after this many seconds"),
+    ),
+    Option("--workers", "workers", dict(type=integer(0, 64))),
+    Option("--threads", "threads", dict(type=integer(1, 1024), help="torch threads")),
+    Option(
+        "--checkpoint-every",
+        "checkpoint_every_s",
+        dict(
+            type=real(0, low_open=True),
+            metavar="SECONDS",
+            help="write the resumable last.pt every this many seconds (presets: 300, gpu 60)",
+        ),
+    ),
+    Option(
+        "--tensorboard",
+        "tensorboard",
+        dict(action="store_true", help="also log the losses for TensorBoard (RUN/tensorboard)"),
+        read=true_or_none,
+    ),
+    Option(
+        "--snapshot-every",
+        "snapshot_every",
+        dict(type=integer(1), help="keep the weights every this many steps (snapshots/)"),
+    ),
+    Option(
+        "--precision",
+        "precision",
+        dict(choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)"),
+    ),
+    Option(
+        "--memory-format",
+        None,
+        dict(
+            choices=("auto", "channels_last", "contiguous"),
+            default="auto",
+            help="tensor layout: auto is channels_last on CUDA and AVX-512 CPUs, contiguous on other CPUs",
+        ),
+    ),
+    Option(
+        "--rel-logit-weight",
+        "rel_logit_weight",
+        dict(
+            type=real(0),
+            help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)",
+        ),
+    ),
+    Option(
+        "--ap-weight",
+        "ap_weight",
+        dict(
+            type=real(0),
+            help="weight of the unweighted descriptor AP term (1 - AP) beside R2D2's losses (lburst's presets: "
+            "0.25; paper: 0)",
+        ),
+    ),
+    Option("--lr", "lr", dict(type=real(0, 1, low_open=True), help="Adam's learning rate (default: the preset's)")),
+    Option(
+        "--rel-base",
+        "rel_base",
+        dict(
+            type=real(0, 1),
+            help="R2D2's base AP (kappa) of the reliability loss: pixels whose AP passes it learn to be reliable "
+            "(default 0.5)",
+        ),
+    ),
+    Option(
+        "--ap-border",
+        "ap_border",
+        dict(
+            type=integer(0, 64),
+            metavar="PX",
+            help="the reliability loss skips query pixels this close to the border (R2D2: 16); "
+            "0 also trains reliability at the image border",
+        ),
+    ),
+    Option(
+        "--distill-weight",
+        "distill_weight",
+        dict(type=real(0), help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)"),
+    ),
+)
+
+#: the options that set a :class:`PairConfig` field (:func:`given_pair_options`)
+PAIR_OPTIONS = (
+    Option(
+        "--max-rotation",
+        "max_rotation_deg",
+        dict(
+            type=real(0, 180),
+            metavar="DEG",
+            help="largest in-plane rotation between the two bursts of a training pair (presets: 15); "
+            "180 trains descriptors to match views turned any way",
+        ),
+    ),
+    Option(
+        "--scale-range",
+        "scale_range",
+        dict(
+            type=real(0.1, 10),
+            nargs=2,
+            metavar=("LOW", "HIGH"),
+            help="range of the isotropic scale between the two bursts of a training pair, drawn log-uniformly "
+            "(presets: 0.8 1.25; R2D2 rescales its second image to 256-1024 px, a far wider range)",
+        ),
+        read=optional_tuple,
+    ),
+    Option(
+        "--burst-flow",
+        "burst_flow_px",
+        dict(
+            type=real(0, 16),
+            metavar="PX",
+            help="largest std of the smooth non-uniform flow between a burst's frames, per frame, beyond the rest "
+            "of its motion (burst and aligned presets: 1): what alignment leaves where the scene has depth",
+        ),
+    ),
+    Option(
+        "--max-tilt",
+        "max_tilt",
+        dict(
+            type=real(0, 0.9),
+            metavar="FRACTION",
+            help="largest perspective tilt between the two bursts: one edge of the crop shrinks and the opposite "
+            "one grows by up to this fraction of its length (presets: 0.15)",
+        ),
+    ),
+    Option(
+        "--color-jitter",
+        "color_jitter",
+        color_jitter_kwargs(
+            help="largest colour change of a pair's second burst against its first: relative brightness, "
+            "contrast and saturation, and hue as a fraction of the colour circle (presets: 0 0 0 0; R2D2: "
+            "0.2 0.2 0.2 0.1)"
+        ),
+        read=optional_tuple,
+    ),
+    Option(
+        "--noise-std",
+        "noise_std",
+        dict(
+            type=real(0, 255),
+            nargs=2,
+            metavar=("LOW", "HIGH"),
+            help="range of the Gaussian noise's std on 0..255, drawn per burst (presets: 5 110; burst, aligned: "
+            "25 120)",
+        ),
+        read=optional_tuple,
+    ),
+    Option(
+        "--sensor-prob",
+        "sensor_prob",
+        dict(
+            type=real(0, 1),
+            metavar="P",
+            help="share of training bursts with a calibrated sensor's noise (sensor:NAME@ISO, docs/noise.md), "
+            "taken from the Gaussian share (default 0)",
+        ),
+    ),
+    Option(
+        "--sensors",
+        "sensors",
+        dict(
+            nargs="+",
+            metavar="NAME@ISO",
+            help=f"the sensors of --sensor-prob, drawn uniformly per burst (default: {' '.join(SENSOR_MIX)})",
+        ),
+        read=optional_tuple,
+    ),
+)
+
+#: the options of the network, its teacher and its start (:class:`TrainConfig` fields)
+NETWORK_OPTIONS = (
+    Option(
+        "--spread-weight",
+        "spread_weight",
+        dict(
+            type=real(0), help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)"
+        ),
+    ),
+    Option(
+        "--ema-decay",
+        "ema_decay",
+        dict(
+            type=real(0, 1),
+            metavar="D",
+            help="also keep a moving average of the weights, over about 1/(1-D) steps (snapshots/*.ema.pt, "
+            "final.pt); below 1, default 0: none",
+        ),
+    ),
+    Option(
+        "--arch",
+        "arch",
+        dict(
+            help="network: lburst (Fast-Quad-L2-Net), lite (the light network), or a light network of other "
+            "widths, e.g. 'LBurstLite(fine=48,coarse=128,dilations=1-2-4-8)'"
+        ),
+    ),
+    Option(
+        "--teacher",
+        "teacher",
+        dict(
+            help="distil from this frozen network on the same noisy bursts (a checkpoint or a shipped name, e.g. "
+            "lburst-b5)"
+        ),
+    ),
+    Option(
+        "--teacher-sees",
+        "teacher_sees",
+        dict(
+            choices=TEACHER_INPUTS,
+            help="what --teacher reads: the student's noisy bursts (default) or the noise-free burst, "
+            "so a fine-tune is pulled towards its starting network's clean output",
+        ),
+    ),
+    Option("--init", "init", dict(help="start from this checkpoint of our own (e.g. lburst/weights/lburst-b5.pt)")),
+    Option("--seed", "seed", dict(type=integer(0))),
+)
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -28,169 +255,14 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", required=True, help="run folder (checkpoints, log.csv)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="cpu")
-    p.add_argument("--frames", type=integer(1, 99), help="burst length N (1 = single-image network)")
-    p.add_argument("--steps", type=integer(1))
-    p.add_argument("--batch-size", type=integer(1, 512))
-    p.add_argument("--time-budget", type=real(0, low_open=True), help="stop (resumably) after this many seconds")
-    p.add_argument("--workers", type=integer(0, 64))
-    p.add_argument("--threads", type=integer(1, 1024), help="torch threads")
-    p.add_argument(
-        "--checkpoint-every",
-        type=real(0, low_open=True),
-        metavar="SECONDS",
-        help="write the resumable last.pt every this many seconds (presets: 300, gpu 60)",
-    )
-    p.add_argument("--tensorboard", action="store_true", help="also log the losses for TensorBoard (RUN/tensorboard)")
-    p.add_argument("--snapshot-every", type=integer(1), help="keep the weights every this many steps (snapshots/)")
-    p.add_argument("--precision", choices=sorted(AUTOCAST_DTYPES), help="autocast of the forward pass (default fp32)")
-    p.add_argument(
-        "--memory-format",
-        choices=("auto", "channels_last", "contiguous"),
-        default="auto",
-        help="tensor layout: auto is channels_last on CUDA and AVX-512 CPUs, contiguous on other CPUs",
-    )
-    p.add_argument(
-        "--rel-logit-weight",
-        type=real(0),
-        help="weight of the reliability-logit margin loss (keeps a collapsed reliability from saturating)",
-    )
-    p.add_argument(
-        "--ap-weight",
-        type=real(0),
-        help="weight of the unweighted descriptor AP term (1 - AP) beside R2D2's losses (lburst's presets: 0.25; paper: 0)",
-    )
-    p.add_argument("--lr", type=real(0, 1, low_open=True), help="Adam's learning rate (default: the preset's)")
-    p.add_argument(
-        "--rel-base",
-        type=real(0, 1),
-        help="R2D2's base AP (kappa) of the reliability loss: pixels whose AP passes it learn to be reliable (default 0.5)",
-    )
-    p.add_argument(
-        "--ap-border",
-        type=integer(0, 64),
-        metavar="PX",
-        help="the reliability loss skips query pixels this close to the border (R2D2: 16); "
-        "0 also trains reliability at the image border",
-    )
-    p.add_argument(
-        "--distill-weight",
-        type=real(0),
-        help="weight of dense self-distillation from the noise-free burst (the burst preset: 1)",
-    )
-    p.add_argument(
-        "--max-rotation",
-        type=real(0, 180),
-        metavar="DEG",
-        help="largest in-plane rotation between the two bursts of a training pair (presets: 15); "
-        "180 trains descriptors to match views turned any way",
-    )
-    p.add_argument(
-        "--scale-range",
-        type=real(0.1, 10),
-        nargs=2,
-        metavar=("LOW", "HIGH"),
-        help="range of the isotropic scale between the two bursts of a training pair, drawn log-uniformly "
-        "(presets: 0.8 1.25; R2D2 rescales its second image to 256-1024 px, a far wider range)",
-    )
-    p.add_argument(
-        "--burst-flow",
-        type=real(0, 16),
-        metavar="PX",
-        help="largest std of the smooth non-uniform flow between a burst's frames, per frame, beyond the rest of "
-        "its motion (burst and aligned presets: 1): what alignment leaves where the scene has depth",
-    )
-    p.add_argument(
-        "--max-tilt",
-        type=real(0, 0.9),
-        metavar="FRACTION",
-        help="largest perspective tilt between the two bursts: one edge of the crop shrinks and the opposite "
-        "one grows by up to this fraction of its length (presets: 0.15)",
-    )
-    add_color_jitter_argument(
-        p,
-        help="largest colour change of a pair's second burst against its first: relative brightness, contrast "
-        "and saturation, and hue as a fraction of the colour circle (presets: 0 0 0 0; R2D2: 0.2 0.2 0.2 0.1)",
-    )
-    p.add_argument(
-        "--noise-std",
-        type=real(0, 255),
-        nargs=2,
-        metavar=("LOW", "HIGH"),
-        help="range of the Gaussian noise's std on 0..255, drawn per burst (presets: 5 110; burst, aligned: 25 120)",
-    )
-    p.add_argument(
-        "--sensor-prob",
-        type=real(0, 1),
-        metavar="P",
-        help="share of training bursts with a calibrated sensor's noise (sensor:NAME@ISO, docs/noise.md), "
-        "taken from the Gaussian share (default 0)",
-    )
-    p.add_argument(
-        "--sensors",
-        nargs="+",
-        metavar="NAME@ISO",
-        help=f"the sensors of --sensor-prob, drawn uniformly per burst (default: {' '.join(SENSOR_MIX)})",
-    )
-    p.add_argument(
-        "--spread-weight",
-        type=real(0),
-        help="weight of the spread loss: the squared norm of the batch's mean descriptor (default 0)",
-    )
-    p.add_argument(
-        "--ema-decay",
-        type=real(0, 1),
-        metavar="D",
-        help="also keep a moving average of the weights, over about 1/(1-D) steps (snapshots/*.ema.pt, "
-        "final.pt); below 1, default 0: none",
-    )
-    p.add_argument(
-        "--arch",
-        help="network: lburst (Fast-Quad-L2-Net), lite (the light network), or a light network of other widths, "
-        "e.g. 'LBurstLite(fine=48,coarse=128,dilations=1-2-4-8)'",
-    )
-    p.add_argument(
-        "--teacher",
-        help="distil from this frozen network on the same noisy bursts (a checkpoint or a shipped name, e.g. lburst-b5)",
-    )
-    p.add_argument(
-        "--teacher-sees",
-        choices=TEACHER_INPUTS,
-        help="what --teacher reads: the student's noisy bursts (default) or the noise-free burst, "
-        "so a fine-tune is pulled towards its starting network's clean output",
-    )
-    p.add_argument("--init", help="start from this checkpoint of our own (e.g. lburst/weights/lburst-b5.pt)")
-    p.add_argument("--seed", type=integer(0))
+    add_options(p, TRAIN_OPTIONS + PAIR_OPTIONS + NETWORK_OPTIONS)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument("--device")
 
 
 def given_options(args: argparse.Namespace) -> dict:
     """The TrainConfig fields set on the command line (``None``: not given)."""
-    return {
-        "frames": args.frames,
-        "steps": args.steps,
-        "batch_size": args.batch_size,
-        "time_budget_s": args.time_budget,
-        "workers": args.workers,
-        "threads": args.threads,
-        "seed": args.seed,
-        "precision": args.precision,
-        "snapshot_every": args.snapshot_every,
-        "tensorboard": args.tensorboard or None,
-        "rel_logit_weight": args.rel_logit_weight,
-        "ap_weight": args.ap_weight,
-        "lr": args.lr,
-        "rel_base": args.rel_base,
-        "ap_border": args.ap_border,
-        "distill_weight": args.distill_weight,
-        "spread_weight": args.spread_weight,
-        "ema_decay": args.ema_decay,
-        "arch": args.arch,
-        "teacher": args.teacher,
-        "teacher_sees": args.teacher_sees,
-        "init": args.init,
-        "checkpoint_every_s": args.checkpoint_every,
-    }
+    return given(args, TRAIN_OPTIONS + NETWORK_OPTIONS)
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
@@ -219,28 +291,10 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 
 def given_pair_options(args: argparse.Namespace) -> dict:
     """The PairConfig fields set on the command line (``None``: not given)."""
-    return {
-        "max_rotation_deg": getattr(args, "max_rotation", None),
-        "scale_range": tuple(args.scale_range) if getattr(args, "scale_range", None) else None,
-        "max_tilt": getattr(args, "max_tilt", None),
-        "burst_flow_px": getattr(args, "burst_flow", None),
-        "color_jitter": tuple(args.color_jitter) if getattr(args, "color_jitter", None) else None,
-        "noise_std": tuple(args.noise_std) if getattr(args, "noise_std", None) else None,
-        "sensor_prob": getattr(args, "sensor_prob", None),
-        "sensors": tuple(args.sensors) if getattr(args, "sensors", None) else None,
-    }
+    return given(args, PAIR_OPTIONS)
 
 
-PAIR_FLAGS = {
-    "max_rotation_deg": "--max-rotation",
-    "scale_range": "--scale-range",
-    "max_tilt": "--max-tilt",
-    "burst_flow_px": "--burst-flow",
-    "color_jitter": "--color-jitter",
-    "noise_std": "--noise-std",
-    "sensor_prob": "--sensor-prob",
-    "sensors": "--sensors",
-}
+PAIR_FLAGS = {option.name: option.flag for option in PAIR_OPTIONS}
 
 
 def _shown(value) -> str:

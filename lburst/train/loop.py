@@ -420,6 +420,20 @@ def save_state(path: Path, net, optimizer, step: int, cfg: TrainConfig, seconds:
     write_checkpoint(state, path)
 
 
+@dataclass
+class _Run:
+    """What a run trains with: the network, its teacher (itself without ``cfg.teacher``), the
+    optimizer, the weight average, the memory layout, and how the teacher is used."""
+
+    net: torch.nn.Module
+    teacher: torch.nn.Module
+    optimizer: torch.optim.Optimizer
+    ema: AveragedModel | None
+    layout: torch.memory_format
+    teacher_on_noisy: bool
+    lite_distillation: bool
+
+
 @keeps_state
 def train(
     photo_folders: list[str | Path],
@@ -442,12 +456,36 @@ def train(
     global random state for the run only: its caller finds both as they were."""
     out = Path(out)
     ctx = distributed.setup(None if device is None else str(check_device(device)))
-    device = ctx.device
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     last = out / "last.pt"
-    step, seconds = 0, 0.0
     generator = torch.Generator().manual_seed(cfg.seed + ctx.rank)
+    cfg, state = _run_config(cfg, last, resume, precision, ctx.device)
+    photos = list_photos([Path(p) for p in photo_folders])
+    total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / (cfg.batch_size * ctx.world))
+    if total < 1:
+        raise LBurstValueError(f"a run needs at least 1 step, got {total} (--steps, or --epochs x photos / batch)")
+    run = _build_run(cfg, state is None, ctx.device, memory_format)
+    step, seconds = _restore(run, state, last, cfg, generator, ctx.main) if state is not None else (0, 0.0)
+    writer = _tensorboard_writer(out) if cfg.tensorboard and ctx.main else None
+    if ctx.main:
+        out.mkdir(parents=True, exist_ok=True)
+        with atomic_path(out / "config.json") as tmp:
+            tmp.write_text(json.dumps(_config_dict(cfg), indent=2))
+    model = ctx.wrap(run.net.train())
+    step = _train_steps(run, model, cfg, out, ctx, photos, (step, total, seconds), generator, progress, writer)
+    if ctx.main and step >= total:
+        final = run.net if run.ema is None else run.ema.module
+        save_checkpoint(final, out / "final.pt", meta={"step": step, "config": _config_dict(cfg), **_input_meta(cfg)})
+    ctx.close()
+    return last
+
+
+def _run_config(
+    cfg: TrainConfig, last: Path, resume: bool, precision: str | None, device: torch.device
+) -> tuple[TrainConfig, dict | None]:
+    """The run's configuration (on ``resume``: the saved one with :data:`RESUME_OVERRIDES` from
+    ``cfg``), checked, and its saved state (``None`` for a new run)."""
     state = None
     if resume and not last.is_file():
         raise CheckpointError(f"{last}: no run to resume (no such file); leave out --resume to start one")
@@ -474,13 +512,15 @@ def train(
         raise LBurstValueError(f"teacher_sees {cfg.teacher_sees!r}: use one of {', '.join(TEACHER_INPUTS)}")
     if cfg.teacher_sees == "clean" and not (cfg.teacher and cfg.distill_weight > 0):
         raise LBurstValueError("--teacher-sees clean needs a --teacher and a --distill-weight above 0")
-    photos = list_photos([Path(p) for p in photo_folders])
-    total = cfg.steps if cfg.epochs is None else int(cfg.epochs * len(photos) / (cfg.batch_size * ctx.world))
-    if total < 1:
-        raise LBurstValueError(f"a run needs at least 1 step, got {total} (--steps, or --epochs x photos / batch)")
+    return cfg, state
+
+
+def _initial_network(cfg: TrainConfig, from_init: bool) -> torch.nn.Module:
+    """The network of ``cfg.arch``, seeded by ``cfg.seed``, with the weights of ``cfg.init`` when
+    ``from_init`` (a new run)."""
     torch.manual_seed(cfg.seed)
     net = build_network(cfg.arch, cfg.frames)
-    if cfg.init and state is None:
+    if cfg.init and from_init:
         init_net, _ = load_checkpoint(cfg.init)
         if type(init_net) is not type(net):
             raise LBurstValueError(f"{cfg.init}: not a network of the run's architecture {cfg.arch!r}")
@@ -491,6 +531,12 @@ def train(
                 f"{cfg.init}: a {init_net.config.frames}-frame network, but the run has {cfg.frames} frames"
             )
         net.load_state_dict(init_net.state_dict())
+    return net
+
+
+def _build_run(cfg: TrainConfig, new: bool, device: torch.device, memory_format: str) -> _Run:
+    """The network (its step's memory checked first), teacher, optimizer and weight average of a run."""
+    net = _initial_network(cfg, new)
     check_step_memory(net, 3 * cfg.frames, cfg.batch_size, cfg.pair.crop, device_memory_limit(device))
     layout = training_memory_format(device, memory_format)
     net = net.to(device).to(memory_format=layout)
@@ -501,26 +547,28 @@ def train(
         teacher = teacher_form(teacher, cfg.precision).to(device)
     optimizer = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     ema = weight_average(net, cfg.ema_decay)
-    if state is not None:
-        net.load_state_dict(state["state_dict"])
-        optimizer.load_state_dict(state["optimizer"])
-        if ema is not None:
-            if "ema" not in state:
-                raise CheckpointError(f"{last}: the run keeps no weight average (ema_decay {cfg.ema_decay})")
-            ema.load_state_dict(state["ema"])
-        step, seconds = int(state["step"]), float(state["seconds"])
-        torch.set_rng_state(state["torch_rng"])
-        if ctx.main:  # the saved sampling state is rank 0's; the others start anew from their seed
-            generator.set_state(state["generator"])
-    model = ctx.wrap(net.train())
-    writer = _tensorboard_writer(out) if cfg.tensorboard and ctx.main else None
-    if ctx.main:
-        out.mkdir(parents=True, exist_ok=True)
-        with atomic_path(out / "config.json") as tmp:
-            tmp.write_text(json.dumps(_config_dict(cfg), indent=2))
-    log = _read_log(out / "log.csv", step)
-    loader = DataLoader(
-        PairDataset(photos, cfg.pair, cfg.seed, clean=cfg.distill_weight > 0 and not teacher_on_noisy),
+    return _Run(net, teacher, optimizer, ema, layout, teacher_on_noisy, lite_distillation)
+
+
+def _restore(run: _Run, state: dict, last: Path, cfg: TrainConfig, generator, main: bool) -> tuple[int, float]:
+    """The saved weights, optimizer, weight average and random states into ``run``; returns the
+    saved step and seconds."""
+    run.net.load_state_dict(state["state_dict"])
+    run.optimizer.load_state_dict(state["optimizer"])
+    if run.ema is not None:
+        if "ema" not in state:
+            raise CheckpointError(f"{last}: the run keeps no weight average (ema_decay {cfg.ema_decay})")
+        run.ema.load_state_dict(state["ema"])
+    torch.set_rng_state(state["torch_rng"])
+    if main:  # the saved sampling state is rank 0's; the others start anew from their seed
+        generator.set_state(state["generator"])
+    return int(state["step"]), float(state["seconds"])
+
+
+def _loader(photos: list[Path], cfg: TrainConfig, run: _Run, step: int, ctx, device: torch.device) -> DataLoader:
+    """The stream of training pairs from ``step`` on (each rank its share)."""
+    return DataLoader(
+        PairDataset(photos, cfg.pair, cfg.seed, clean=cfg.distill_weight > 0 and not run.teacher_on_noisy),
         batch_size=cfg.batch_size,
         sampler=StreamSampler(step * cfg.batch_size * ctx.world + ctx.rank, ctx.world),
         num_workers=cfg.workers,
@@ -529,62 +577,103 @@ def train(
         pin_memory=device.type == "cuda",
         worker_init_fn=init_worker,
     )
+
+
+def _losses(run: _Run, model, batch: dict[str, torch.Tensor], cfg: TrainConfig, generator) -> dict[str, torch.Tensor]:
+    """The losses of one batch: the light network's distillation step, or :func:`training_step`."""
+    if run.lite_distillation:
+        x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
+        return lite_distillation_step(
+            model,
+            run.teacher,
+            batch,
+            x.contiguous(memory_format=run.layout),
+            cfg.patch,
+            cfg.distill_weight,
+            cfg.precision,
+            ap_weight=cfg.ap_weight,
+            generator=generator,
+        )
+    return training_step(
+        model,
+        batch,
+        cfg.patch,
+        generator,
+        ap_weight=cfg.ap_weight,
+        precision=cfg.precision,
+        rel_logit_weight=cfg.rel_logit_weight,
+        rel_logit_margin=cfg.rel_logit_margin,
+        rel_base=cfg.rel_base,
+        distill_weight=cfg.distill_weight,
+        teacher=run.teacher,
+        memory_format=run.layout,
+        spread_weight=cfg.spread_weight,
+        teacher_on_noisy=run.teacher_on_noisy,
+        ap_border=cfg.ap_border,
+    )
+
+
+def _update(run: _Run, losses: dict[str, torch.Tensor]) -> bool:
+    """One optimizer step (and weight-average update) from ``losses``; ``False``, with no update,
+    when a gradient is not finite (one bad batch must not leave NaN weights behind)."""
+    run.optimizer.zero_grad(set_to_none=True)
+    losses["loss"].backward()
+    if not finite_gradients(run.net):
+        return False
+    run.optimizer.step()
+    if run.ema is not None:
+        run.ema.update_parameters(run.net)
+    return True
+
+
+def _snapshot(run: _Run, out: Path, step: int, cfg: TrainConfig) -> None:
+    """``snapshots/step_XXXXXX.pt`` (and ``.ema.pt`` of the weight average) in the published layout."""
+    meta = {"step": step, **_input_meta(cfg)}
+    save_checkpoint(run.net, out / "snapshots" / f"step_{step:06d}.pt", meta=meta)
+    if run.ema is not None:
+        average = {**meta, "ema_decay": cfg.ema_decay}
+        save_checkpoint(run.ema.module, out / "snapshots" / f"step_{step:06d}.ema.pt", meta=average)
+
+
+def _train_steps(
+    run: _Run,
+    model,
+    cfg: TrainConfig,
+    out: Path,
+    ctx,
+    photos,
+    span: tuple[int, int, float],
+    generator,
+    progress: bool,
+    writer,
+) -> int:
+    """The steps from ``span``'s first to its total (``seconds`` already spent), each logged
+    (and to TensorBoard's ``writer``), checkpointed every ``cfg.checkpoint_every_s`` and at the
+    end (also on Ctrl-C or SIGTERM, then raised); returns the last step done."""
+    step, total, seconds = span
+    last = out / "last.pt"
+    log = _read_log(out / "log.csv", step)
+    data = iter(_loader(photos, cfg, run, step, ctx, ctx.device))
     started = time.monotonic()
     last_save = started
 
     def checkpoint() -> None:  # rank 0: the log, then the resumable state, atomically
         _write_log(out / "log.csv", log)  # first: a resume reads the log only up to the state's step
-        save_state(last, net, optimizer, step, cfg, seconds + time.monotonic() - started, generator, ema)
+        elapsed = seconds + time.monotonic() - started
+        save_state(last, run.net, run.optimizer, step, cfg, elapsed, generator, run.ema)
 
     bar = tqdm(
         total=total, initial=step, desc=f"train b{cfg.frames}", disable=not (progress and ctx.main), dynamic_ncols=True
     )
-    data = iter(loader)
     skipped = 0
     previous = _stop_on_sigterm()
     try:
         while step < total:
             if ctx.any(cfg.time_budget_s is not None and time.monotonic() - started > cfg.time_budget_s):
                 break
-            batch = {k: v.to(device, non_blocking=True) for k, v in next(data).items()}
-            if lite_distillation:
-                x = torch.cat([_normalise(batch["burst_a"]), _normalise(batch["burst_b"])])
-                losses = lite_distillation_step(
-                    model,
-                    teacher,
-                    batch,
-                    x.contiguous(memory_format=layout),
-                    cfg.patch,
-                    cfg.distill_weight,
-                    cfg.precision,
-                    ap_weight=cfg.ap_weight,
-                    generator=generator,
-                )
-            else:
-                losses = training_step(
-                    model,
-                    batch,
-                    cfg.patch,
-                    generator,
-                    ap_weight=cfg.ap_weight,
-                    precision=cfg.precision,
-                    rel_logit_weight=cfg.rel_logit_weight,
-                    rel_logit_margin=cfg.rel_logit_margin,
-                    rel_base=cfg.rel_base,
-                    distill_weight=cfg.distill_weight,
-                    teacher=teacher,
-                    memory_format=layout,
-                    spread_weight=cfg.spread_weight,
-                    teacher_on_noisy=teacher_on_noisy,
-                    ap_border=cfg.ap_border,
-                )
-            optimizer.zero_grad(set_to_none=True)
-            losses["loss"].backward()
-            if finite_gradients(net):
-                optimizer.step()
-                if ema is not None:
-                    ema.update_parameters(net)
-            else:  # one bad batch must not leave NaN weights behind: skip its update, say so in the log
+            batch = {k: v.to(ctx.device, non_blocking=True) for k, v in next(data).items()}
+            losses = _losses(run, model, batch, cfg, generator)
+            if not _update(run, losses):  # skipped: say so in the log
                 skipped += 1
                 bar.write(f"step {step + 1}: non-finite loss or gradient, update skipped ({skipped} so far)")
             values = ctx.mean(losses)
@@ -604,11 +693,7 @@ def train(
                 for k in losses:
                     writer.add_scalar(f"train/{k}", values[k], step)
             if cfg.snapshot_every and step % cfg.snapshot_every == 0:
-                meta = {"step": step, **_input_meta(cfg)}
-                save_checkpoint(net, out / "snapshots" / f"step_{step:06d}.pt", meta=meta)
-                if ema is not None:
-                    average = {**meta, "ema_decay": cfg.ema_decay}
-                    save_checkpoint(ema.module, out / "snapshots" / f"step_{step:06d}.ema.pt", meta=average)
+                _snapshot(run, out, step, cfg)
             if time.monotonic() - last_save > cfg.checkpoint_every_s:
                 checkpoint()
                 last_save = time.monotonic()
@@ -622,15 +707,9 @@ def train(
     bar.close()
     if ctx.main:
         checkpoint()
-        if step >= total:
-            final = net if ema is None else ema.module
-            save_checkpoint(
-                final, out / "final.pt", meta={"step": step, "config": _config_dict(cfg), **_input_meta(cfg)}
-            )
     if writer is not None:
         writer.close()
-    ctx.close()
-    return last
+    return step
 
 
 def _input_meta(cfg: TrainConfig) -> dict:
