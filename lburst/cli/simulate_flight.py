@@ -18,7 +18,12 @@ from lburst.sfm.positions import DEFAULT_STD_M, POSITIONS_FILE, write_positions
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
     """Options of a ``lburst simulate flight``-style command (see :func:`main`)."""
-    default = NightFlightConfig()
+    add_output_arguments(p)
+    add_flight_arguments(p)
+
+
+def add_output_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the flight goes: the scene folder of bursts, and a video, frames or a bag of it."""
     p.add_argument(
         "out_dir", type=Path, nargs="?", metavar="OUT", help="scene folder of bursts to write (re-running resumes)"
     )
@@ -64,6 +69,11 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--crf", type=integer(0, 51), default=16, help="H.264 quality of --video (lower: better; default 16)"
     )
+
+
+def add_flight_arguments(p: argparse.ArgumentParser) -> None:
+    """The flight: its path (an arc, a loop or a survey), camera, bursts, noise and GNSS log."""
+    default = NightFlightConfig()
     p.add_argument(
         "--turn",
         type=real(-3600, 3600),
