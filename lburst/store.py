@@ -8,7 +8,7 @@ method has the same key wherever it was computed (``lburst extract`` of a record
 ``lburst reconstruct`` of it share the features of its keyframes):
 
 - ``method`` (:func:`method_key`): the method spec and the SHA-1 of the weights it loads
-  (:func:`lburst.methods.learned.results_key`), so retrained weights are not served
+  (:meth:`lburst.methods.Method.results_key`), so retrained weights are not served
   old features, plus the options given besides the spec (``precision``, ``runtime``), an
   option left out when it has the method's default value (``lburst extract`` and
   ``lburst reconstruct`` both write a learned method's ``top_k`` into the spec, so they key
@@ -41,7 +41,7 @@ import numpy as np
 
 from lburst.burst.io import read_features_npz, write_features_npz
 from lburst.features import Features, check_features
-from lburst.methods import methods, parse_spec
+from lburst.methods import Method
 
 
 def files_sha1(files: list[Path] | tuple[Path, ...], root: Path | None = None) -> str:
@@ -84,36 +84,20 @@ def recording_content(recording: Any) -> str:
     return f"{sha1}|{recording.options.signature()}"
 
 
-def _default_options(spec: str) -> dict[str, str]:
-    """The options of the method that ``spec`` runs on the burst with their default values
-    (as strings), less those the spec sets itself."""
-    from dataclasses import MISSING, fields
-
-    inner = parse_spec(spec)
-    while inner.inner is not None:
-        inner = inner.inner
-    info = {m.name: m for m in methods()}.get(inner.name)
-    if info is None or info.options is None:
-        return {}
-    return {
-        f.name: str(f.default) for f in fields(info.options) if f.default is not MISSING and f.name not in inner.options
-    }
-
-
 #: the revision of the code that turns a burst into features, raised when it changes what a
 #: method returns for the same burst and weights, so that no stored file of the old code is
 #: served (2: bursts that turn are aligned with their rotation, :mod:`lburst.burst.turning`)
 REVISION = 2
 
 
-def method_key(spec: str, **options: Any) -> dict[str, Any]:
-    """The ``method`` part of a key: the spec with its weights' SHA-1, the options given
-    besides it (less those that are ``None`` or the method's default), and :data:`REVISION`."""
-    from lburst.methods.learned import results_key
-
-    defaults = _default_options(spec)
+def method_key(method: str | Method, **options: Any) -> dict[str, Any]:
+    """The ``method`` part of a key: the method's spec with its weights' SHA-1
+    (:meth:`lburst.methods.Method.results_key`), the options given besides it (less those that
+    are ``None`` or the method's default), and :data:`REVISION`."""
+    method = Method.of(method)
+    defaults = method.default_options()
     given = {k: str(v) for k, v in sorted(options.items()) if v is not None and defaults.get(k) != str(v)}
-    return {"spec": results_key(spec), "options": given, "revision": REVISION}
+    return {"spec": method.results_key(), "options": given, "revision": REVISION}
 
 
 def key(

@@ -213,7 +213,6 @@ INNER_IMPORTS = {
     ("lburst.demo", "lburst.model.extractor"): "torch, only when the demo runs",
     ("lburst.matching", "lburst.match"): "torch: the matcher registry stays light (import lburst.methods)",
     ("lburst.sfm.colmap", "lburst.burst.io"): "OpenCV: the COLMAP child imports no cv2",
-    ("lburst.store", "lburst.methods.learned"): "torch: a store key of a method without weights loads none",
 }
 
 

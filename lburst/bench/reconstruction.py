@@ -33,8 +33,7 @@ from typing import Any
 
 from lburst.burst.io import atomic_path, file_sha1
 from lburst.errors import LBurstValueError
-from lburst.methods import method_slug, with_default
-from lburst.methods.learned import results_key
+from lburst.methods import Method
 from lburst.scenes.photo_scene import REFERENCE_DIR
 from lburst.scenes.reference_spread import load_spread
 from lburst.sfm.inputs import open_input
@@ -114,17 +113,18 @@ def _stored_key(out: Path) -> dict[str, Any] | None:
         return None
 
 
-def run_spec(scene: Path, spec: str, options: dict[str, Any]) -> str:
-    """The spec a run of ``spec`` on ``scene`` records in ``result.json``: with the keypoints
+def run_spec(scene: Path, method: Method, options: dict[str, Any]) -> Method:
+    """The method a run of ``method`` on ``scene`` records in ``result.json``: with the keypoints
     that :func:`lburst.sfm.reconstruct.reconstruct_scene` gives a learned method whose spec sets
     none (8,000 for a scene, 4,000 for a recording)."""
     if not scene.exists():
-        return spec
-    return with_default(spec, "top_k", open_input(scene, options.get("recording")).keypoints)
+        return method
+    return method.with_default("top_k", open_input(scene, options.get("recording")).keypoints)
 
 
-def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
+def run_one(scene: Path, method: Method, out: Path, force: bool, options: dict[str, Any]) -> dict[str, Any]:
     """The table row of one method on one scene (from ``result.json`` when already done)."""
+    spec = str(method)
     row: dict[str, Any] = {"method": spec, "scene": scene.name, "out": str(out)}
     done = out / RESULT_FILE
     key = run_key(scene, options) if scene.exists() else None
@@ -132,7 +132,7 @@ def run_one(scene: Path, spec: str, out: Path, force: bool, options: dict[str, A
         previous = ReconstructionResult.load(done)
         stored = _stored_key(out) if (out / KEY_FILE).exists() else key
         if (
-            previous.method in (spec, run_spec(scene, spec, options))
+            previous.method in (spec, str(run_spec(scene, method, options)))
             and previous.metrics.get("matcher", "mnn") == options.get("matcher", "mnn")
             and stored == key
         ):
@@ -197,7 +197,7 @@ def reference_spreads(scenes: Sequence[str | Path]) -> dict[str, dict[str, Any]]
 
 def run_benchmark(
     scenes: list[str | Path],
-    methods: list[str],
+    methods: Sequence[str | Method],
     out_dir: str | Path,
     force: bool = False,
     seeds: Sequence[int] = (0,),
@@ -214,9 +214,10 @@ def run_benchmark(
         raise LBurstValueError(f"seeds: non-negative integers, got {seeds}")
     if "seed" in options:
         raise LBurstValueError("pass COLMAP's seeds as seeds=[...], not seed=")
+    methods = [Method.of(method) for method in methods]
     rows = []
-    for spec in methods:
-        folder = out_dir / method_slug(results_key(spec))  # hashes the weights once per method
+    for method in methods:
+        folder = out_dir / method.slug()  # hashes the weights once per method
         for scene in map(Path, scenes):
             shared = _shared_features(scene, folder / run_name(scene, seeds[0]), options) if len(seeds) > 1 else {}
             first = {}
@@ -227,14 +228,15 @@ def run_benchmark(
                 extra = {} if seed == 0 else {"seed": seed}
                 extra.update(shared if seed != seeds[0] else first)
                 out = folder / run_name(scene, seed)
-                rows.append({**run_one(scene, spec, out, force, {**options, **extra}), "seed": seed})
+                rows.append({**run_one(scene, method, out, force, {**options, **extra}), "seed": seed})
+    specs = [str(method) for method in methods]
     means = [
         {"method": spec, "scene": f"mean ({len(scenes)})", **aggregate([r for r in rows if r["method"] == spec])}
-        for spec in methods
+        for spec in specs
     ]
     report = {
         "scenes": [str(s) for s in scenes],
-        "methods": methods,
+        "methods": specs,
         "options": options if features_from is None else {**options, "features_from": str(features_from)},
         "seeds": seeds,
         "rows": rows,

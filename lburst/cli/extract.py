@@ -40,11 +40,11 @@ from lburst.burst.io import (
     write_features_h5,
 )
 from lburst.cli.numbers import integer
-from lburst.cli.options import add_cluster_argument, add_recording_arguments, recording_options
+from lburst.cli.options import add_cluster_argument, add_recording_arguments, parse_method, recording_options
 from lburst.cluster.runner import Runner, open_runner
 from lburst.cluster.spec import parse_cluster
 from lburst.errors import LBurstFileNotFoundError
-from lburst.methods import accepts, check, create, with_default, with_given
+from lburst.methods import Method
 from lburst.model.network import AUTOCAST_DTYPES
 from lburst.model.runtimes import RUNTIMES
 from lburst.sfm.feature_stage import KeyframeBurst, Layout, compute_for, keyframe_features
@@ -56,18 +56,11 @@ CUT_FILE = "cut.json"
 DEFAULT_TOP_K = 4000
 
 
-def method_spec(method: str | None, weights: str | None, frame_order: str | None = None) -> str:
-    """The method spec for ``--method``/``--weights``: ``lburst`` (shipped weights) by default."""
-    weights = weights or os.environ.get("LBURST_WEIGHTS")
-    if method is None:
-        spec = f"lburst:{weights}" if weights else "lburst"
-    elif weights and ":" not in method.split(",")[0]:
-        spec = f"{method}:{weights}"
-    else:
-        spec = method
-    if frame_order:
-        spec += f",frame_order={frame_order}"
-    return spec
+def chosen_method(method: Method | None, weights: str | None, frame_order: str | None = None) -> Method:
+    """The method of ``--method``/``--weights``/``--frame-order``: ``lburst`` (shipped weights) by
+    default; ``--weights`` (else ``$LBURST_WEIGHTS``) is the checkpoint of a method that names none."""
+    method = (method or Method("lburst")).with_weights(weights or os.environ.get("LBURST_WEIGHTS"))
+    return method.with_option("frame_order", frame_order) if frame_order else method
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -81,7 +74,9 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", type=Path, required=True, help="output folder for <burst>.npz")
     p.add_argument("--weights", help="checkpoint (default: $LBURST_WEIGHTS, else the shipped lburst-b5)")
-    p.add_argument("--method", help="any method spec, e.g. sift, orb, merge+sift, buff (default: lburst)")
+    p.add_argument(
+        "--method", type=parse_method, help="any method spec, e.g. sift, orb, merge+sift, buff (default: lburst)"
+    )
     p.add_argument(
         "--frame-order",
         choices=["temporal", "published"],
@@ -255,9 +250,9 @@ def extract_bursts(
 
 
 def main(args: argparse.Namespace) -> int:
-    spec = method_spec(args.method, args.weights, args.frame_order)
+    chosen = chosen_method(args.method, args.weights, args.frame_order)
     # the spec's own top_k=N wins over the default; an explicit --top-k that disagrees is refused
-    spec = with_default(with_given(spec, "top_k", args.top_k, "--top-k"), "top_k", DEFAULT_TOP_K)
+    chosen = chosen.with_given("top_k", args.top_k, "--top-k").with_default("top_k", DEFAULT_TOP_K)
     cluster = parse_cluster(args.cluster) if args.cluster is not None else None
     missing = [path for path in args.bursts if not path.exists()]
     if missing:  # nothing done, no --out made: a typo is not a burst that failed
@@ -269,18 +264,18 @@ def main(args: argparse.Namespace) -> int:
         "precision": args.precision if args.precision != "fp32" else None,
         "runtime": args.runtime,
     }
-    options = {k: v for k, v in wanted.items() if v is not None and accepts(spec, k)}  # learned methods have them
-    check(spec, **options)  # a bad spec or option is one line (exit 2) before any work, with --cluster too
-    extractor = create(spec, **options) if cluster is None else None  # on a cluster: one per worker
+    options = {k: v for k, v in wanted.items() if v is not None and chosen.accepts(k)}  # learned methods have them
+    chosen.check(**options)  # a bad spec or option is one line (exit 2) before any work, with --cluster too
+    extractor = chosen.create(**options) if cluster is None else None  # on a cluster: one per worker
     cut = recording_options(args)
-    method = store.method_key(spec, **{k: v for k, v in options.items() if k != "device"})
+    method = store.method_key(chosen, **{k: v for k, v in options.items() if k != "device"})
     failed: list[tuple[Path, str]] = []
     finished: list[tuple[str, Path]] = []  # (features.h5 group, .npz) of every finished burst
     names: dict[str, Path] = {}
     done = 0
     with open_runner(cluster) as runner:  # a cluster that cannot be reached leaves no --out
         args.out.mkdir(parents=True, exist_ok=True)
-        compute = compute_for(spec, runner, extractor, options, args.threads)
+        compute = compute_for(chosen, runner, extractor, options, args.threads)
         pending: list[tuple[Path, KeyframeBurst]] = []  # single bursts, mapped together
         for path in args.bursts:
             source = open_bursts(path, cut)  # a burst, or a recording cut into keyframe bursts

@@ -10,6 +10,7 @@ from lburst.burst.sources import DEFAULT_FPS, Normalisation, RecordingOptions
 from lburst.cli.numbers import integer, real
 from lburst.errors import LBurstValueError
 from lburst.matching import DEFAULT, available, create
+from lburst.methods import Method
 
 
 def add_recording_arguments(p) -> None:
@@ -82,6 +83,15 @@ def matcher_spec(spec: str) -> str:
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return spec
+
+
+def parse_method(spec: str) -> Method:
+    """The :class:`lburst.methods.Method` of ``spec`` (an argparse ``type``): a spec that breaks
+    the grammar is refused as the command line is read; its names and values by ``Method.check``."""
+    try:
+        return Method.parse(spec)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_matcher_argument(parser) -> None:

@@ -1,8 +1,9 @@
 """One extractor per process: on a cluster the network is loaded once per worker, not once per burst.
 
-A task names its extractor by an :class:`ExtractorRequest`: the method spec and the options
-to create it with, its key (the store's :func:`lburst.store.method_key`: the spec with its
-weights' SHA-1 and options, plus the device), and the torch threads a burst runs with.
+A task names its extractor by an :class:`ExtractorRequest`: the method (a
+:class:`lburst.methods.Method`, which pickles) and the options to create it with, its key
+(the store's :func:`lburst.store.method_key`: the spec with its weights' SHA-1 and options,
+plus the device), and the torch threads a burst runs with.
 :class:`WorkerExtractor` is the per-burst ``compute`` of
 :func:`lburst.sfm.feature_stage.keyframe_features` on a cluster: it travels with each task,
 and :func:`extractor_for` creates the extractor on a worker's first task with that key and
@@ -19,8 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from lburst import methods, store
+from lburst import store
 from lburst.features import Features, check_features
+from lburst.methods import Method
 
 _LOADED: dict[str, Callable] = {}
 
@@ -29,18 +31,20 @@ _LOADED: dict[str, Callable] = {}
 class ExtractorRequest:
     """The extractor a task needs (module docstring); ``threads`` ``None`` leaves torch's count."""
 
-    spec: str
+    method: Method
     options: tuple[tuple[str, Any], ...] = ()
     key: str = ""
     threads: int | None = None
 
 
-def extractor_request(spec: str, options: dict[str, Any] | None = None, threads: int | None = None) -> ExtractorRequest:
-    """The :class:`ExtractorRequest` of ``create(spec, **options)``; its key costs one read of the weights."""
-    options = dict(options or {})
-    method = store.method_key(spec, **{k: v for k, v in options.items() if k != "device"})
-    key = json.dumps({"method": method, "device": options.get("device")}, sort_keys=True)
-    return ExtractorRequest(spec, tuple(sorted(options.items())), key, threads)
+def extractor_request(
+    method: str | Method, options: dict[str, Any] | None = None, threads: int | None = None
+) -> ExtractorRequest:
+    """The :class:`ExtractorRequest` of ``method.create(**options)``; its key costs one read of the weights."""
+    method, options = Method.of(method), dict(options or {})
+    stored = store.method_key(method, **{k: v for k, v in options.items() if k != "device"})
+    key = json.dumps({"method": stored, "device": options.get("device")}, sort_keys=True)
+    return ExtractorRequest(method, tuple(sorted(options.items())), key, threads)
 
 
 def set_threads(threads: int | None) -> None:
@@ -58,7 +62,7 @@ def extractor_for(request: ExtractorRequest) -> Callable:
     ``request.threads`` threads."""
     set_threads(request.threads)
     if request.key not in _LOADED:
-        _LOADED[request.key] = methods.create(request.spec, **dict(request.options))
+        _LOADED[request.key] = request.method.create(**dict(request.options))
     return _LOADED[request.key]
 
 

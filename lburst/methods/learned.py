@@ -8,34 +8,15 @@ from typing import Literal
 
 import numpy as np
 
-from lburst.burst.io import file_sha1
 from lburst.errors import LBurstValueError
 from lburst.features import Features, concatenate, select, spread_top_k
 from lburst.methods import register
-from lburst.methods import weights_file as method_weights
 from lburst.model.extractor import ROTATIONS, LBurst, MultiScaleConfig
 from lburst.model.network import autocast_dtype
 from lburst.model.runtimes import RUNTIMES
 from lburst.weights import resolve_weights, weights_path
 
 DEFAULT_WEIGHTS = {"lburst": "lburst-b5", "lburst-lite": "lburst-b5-lite", "r2d2": "lburst-b1"}
-
-
-def weights_file(spec: str) -> Path | None:
-    """The checkpoint file that a method spec loads (``None`` when it loads none).
-
-    ``lburst[:CKPT]`` and ``r2d2[:CKPT]``, also inside a wrapper (``merge+``); without
-    ``CKPT`` the shipped weights.  Caches of results key on this file's content, so that
-    a checkpoint retrained in place (or new shipped weights) is not served stale results.
-    """
-    return method_weights(spec)
-
-
-def results_key(spec: str) -> str:
-    """``spec``, plus ``@`` and 12 hex digits of the SHA-1 of the weights it loads, if any
-    (the name under which benchmarks cache its results)."""
-    path = weights_file(spec)
-    return f"{spec}@{file_sha1(path)[:12]}" if path is not None and path.is_file() else spec
 
 
 @dataclass(frozen=True)

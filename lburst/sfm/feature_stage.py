@@ -29,6 +29,7 @@ from lburst.cluster.models import WorkerExtractor, extractor_request, set_thread
 from lburst.cluster.runner import Runner
 from lburst.errors import LBurstFileNotFoundError, LBurstValueError
 from lburst.features import Features, check_features, check_inside
+from lburst.methods import Method
 from lburst.sfm.outputs import write_common_frame
 from lburst.sfm.result import ReconstructionError
 
@@ -281,23 +282,24 @@ def _has_method(meta: Any) -> bool:
 
 
 def compute_for(
-    spec: str,
+    method: str | Method,
     runner: Runner,
     extractor: Callable | None = None,
     options: dict[str, Any] | None = None,
     threads: int | None = None,
 ) -> Callable[[np.ndarray], Features]:
-    """The per-burst ``compute`` of ``spec`` (created with ``options``) for ``runner``: in this
+    """The per-burst ``compute`` of ``method`` (created with ``options``) for ``runner``: in this
     process ``extractor`` or one created on first use (:class:`LazyExtractor`), with torch at
     ``threads``; on a cluster each worker's own (:class:`lburst.cluster.models.WorkerExtractor`),
-    at ``threads`` or the runner's count (one).  A spec or option that :func:`lburst.methods.create`
-    would refuse is refused here, before any burst (:func:`lburst.methods.check`)."""
+    at ``threads`` or the runner's count (one).  A method or option that :meth:`Method.create`
+    would refuse is refused here, before any burst (:meth:`Method.check`)."""
+    method = Method.of(method)
     if extractor is None:
-        methods.check(spec, **(options or {}))
+        method.check(**(options or {}))
     if runner.remote:
-        return WorkerExtractor(extractor_request(spec, options, threads or runner.threads))
+        return WorkerExtractor(extractor_request(method, options, threads or runner.threads))
     set_threads(threads)
-    return LazyExtractor(spec, extractor, options)
+    return LazyExtractor(method, extractor, options)
 
 
 def safe_name(name: str) -> str:
@@ -317,12 +319,12 @@ def utf8(text: str) -> bool:
 
 class LazyExtractor:
     """``extractor(burst)``, checked (:func:`lburst.features.check_features`), the method created
-    from ``spec`` on first use only, so a run whose features are all stored never loads a network."""
+    from ``method`` on first use only, so a run whose features are all stored never loads a network."""
 
-    def __init__(self, spec: str, extractor=None, options: dict[str, Any] | None = None) -> None:
-        self.spec, self.extractor, self.options = spec, extractor, dict(options or {})
+    def __init__(self, method: str | Method, extractor=None, options: dict[str, Any] | None = None) -> None:
+        self.method, self.extractor, self.options = Method.of(method), extractor, dict(options or {})
 
     def __call__(self, burst) -> Features:
         if self.extractor is None:  # torch, for a learned method: only when a burst needs it
-            self.extractor = methods.create(self.spec, **self.options)
+            self.extractor = methods.create(self.method, **self.options)
         return check_features(self.extractor(burst))

@@ -40,6 +40,7 @@ from lburst.extras import MissingExtra
 from lburst.features import Features
 from lburst.geo.exif import frames_track
 from lburst.geo.fixes import GnssError, GnssTrack
+from lburst.methods import Method
 from lburst.sfm import recording as rec
 from lburst.sfm.cameras import CameraPlan, camera_origin
 from lburst.sfm.feature_stage import (
@@ -156,7 +157,7 @@ class InputSource(ABC):
             )
 
     def read(
-        self, spec: str, out: Path, opts: ReconstructOptions, extractor=None, runner: Runner | None = None
+        self, method: str | Method, out: Path, opts: ReconstructOptions, extractor=None, runner: Runner | None = None
     ) -> Keyframes:
         """The features stage of a reconstruction into ``out``: the features of every burst
         (:func:`lburst.sfm.feature_stage.keyframe_features`), in ``OUT/features`` and
@@ -164,13 +165,13 @@ class InputSource(ABC):
         ``out``) where they are stored, computed in this process or by ``runner`` on a cluster;
         then the scene (:meth:`finish`), its items' features in its order."""
         layout = Layout(out / "features", out / IMAGES, extracted_folders(opts.features, out, self.folder))
-        method = store.method_key(spec)
+        wanted = store.method_key(method)
         runner = runner or Runner()
-        bursts = self.keyframe_bursts(method, lambda name, key: stored(layout, name, key) is not None, out)
+        bursts = self.keyframe_bursts(wanted, lambda name, key: stored(layout, name, key) is not None, out)
         named = (burst for burst in bursts if safe_name(burst.name))  # names COLMAP can store
         if not self.frames_held:  # bursts that read their frames when loaded: listed, so the bar has a total
             named = list(named)
-        compute = compute_for(spec, runner, extractor)
+        compute = compute_for(method, runner, extractor)
         done: dict[str, Features] = {}
         computed = 0
         try:
@@ -182,7 +183,7 @@ class InputSource(ABC):
         if opts.features is not None and computed:  # say why the folder given was not used
             warnings.warn(
                 f"--features {opts.features}: {computed} of {len(done)} bursts were not stored there and were "
-                f"computed: {why_not_stored(layout.elsewhere, method)}",
+                f"computed: {why_not_stored(layout.elsewhere, wanted)}",
                 stacklevel=2,
             )
         scene = self.finish(out)

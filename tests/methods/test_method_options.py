@@ -11,8 +11,7 @@ from typing import Literal
 import numpy as np
 import pytest
 
-from lburst import methods
-from lburst.methods import accepts, create, parse_spec, register, weights_file
+from lburst.methods import Method, accepts, create, register, registry, weights_file
 from lburst.methods.learned import LearnedOptions
 from lburst.methods.options import parse_options
 
@@ -49,7 +48,7 @@ def toy():
         return Toy(options)
 
     yield "toy-test"
-    methods._METHODS.pop("toy-test")
+    registry._METHODS.pop("toy-test")
 
 
 def test_spec_strings_become_typed_options(toy):
@@ -83,8 +82,8 @@ def test_bad_specs_say_what_is_valid(toy, spec, message):
 
 
 def test_wrappers_are_registered_methods_with_their_own_options():
-    spec = parse_spec("merge,reduce=median+orb,max_features=300")
-    assert (spec.name, spec.options, spec.inner.name, spec.inner.options) == (
+    spec = Method.parse("merge,reduce=median+orb,max_features=300")
+    assert (spec.name, spec.given, spec.inner.name, spec.inner.given) == (
         "merge",
         {"reduce": "median"},
         "orb",
@@ -94,7 +93,7 @@ def test_wrappers_are_registered_methods_with_their_own_options():
     assert extractor.reduce == "median" and extractor.inner.name == "orb,max_features=300"
     with pytest.raises(ValueError, match=r"option reduce of method 'merge': expected one of mean, median"):
         create("merge,reduce=mode+sift")
-    plain = parse_spec("lburst:/runs/a+b/last.pt,top_k=100")  # a '+' inside a path is not a wrapper
+    plain = Method.parse("lburst:/runs/a+b/last.pt,top_k=100")  # a '+' inside a path is not a wrapper
     assert (plain.name, plain.arg, plain.inner) == ("lburst", "/runs/a+b/last.pt", None)
 
 
@@ -123,7 +122,7 @@ def test_lburst_methods_lists_every_method_and_matcher_with_defaults(capsys):
 
     assert main(["methods"]) == 0
     text = capsys.readouterr().out
-    for name in methods.available():
+    for name in registry.available():
         assert f"  {name}" in text
     assert "lburst[:CHECKPOINT][,KEY=VALUE...]" in text and "top_k=4000  (int | none)" in text
     assert "merge[,KEY=VALUE...]+SPEC" in text and "reduce=mean  (mean|median)" in text
@@ -139,18 +138,17 @@ def test_lburst_methods_lists_every_method_and_matcher_with_defaults(capsys):
 def test_a_checkpoint_path_with_commas_loads_and_keeps_its_options(tmp_path):
     import shutil
 
-    from lburst.methods import create, parse_spec
     from lburst.weights import weights_path
 
     folder = tmp_path / "run,2"
     folder.mkdir()
     shutil.copy(weights_path("lburst-b5-lite"), folder / "w,1.pt")
     spec = f"lburst-lite:{folder / 'w,1.pt'},top_k=7,runtime=torch"
-    assert parse_spec(spec).arg == str(folder / "w,1.pt")
+    assert Method.parse(spec).arg == str(folder / "w,1.pt")
     burst = np.random.default_rng(0).integers(0, 255, (5, 64, 80, 3), dtype=np.uint8)
     assert len(create(spec)(burst)["keypoints"]) <= 7
     with pytest.raises(ValueError, match="bad option 'w.pt'"):
-        parse_spec("lburst,w.pt")  # no checkpoint given: a bare word is still a bad option
+        Method.parse("lburst,w.pt")  # no checkpoint given: a bare word is still a bad option
 
 
 def test_shipped_names_work_where_a_checkpoint_file_is_expected(tmp_path):
@@ -163,11 +161,13 @@ def test_shipped_names_work_where_a_checkpoint_file_is_expected(tmp_path):
 def test_with_default_sets_an_option_the_spec_leaves_unset():
     """An input's default (``top_k`` of a scene) reaches the method that runs on the burst,
     inside a wrapper too, and never overrides what the spec says or a method without it."""
-    from lburst.methods import with_default
+
+    def with_default(spec: str, option: str, value) -> str:
+        return str(Method.parse(spec).with_default(option, value))
 
     assert with_default("lburst", "top_k", 8000) == "lburst,top_k=8000"
-    assert create(with_default("lburst", "top_k", 8000)).top_k == 8000
-    assert create(with_default("merge+lburst", "top_k", 8000)).inner.top_k == 8000
+    assert create(Method.parse("lburst").with_default("top_k", 8000)).top_k == 8000
+    assert create(Method.parse("merge+lburst").with_default("top_k", 8000)).inner.top_k == 8000
     assert with_default("lburst,top_k=2000", "top_k", 8000) == "lburst,top_k=2000"
     assert with_default("lburst", "top_k", None) == "lburst"
     assert with_default("sift", "top_k", 8000) == "sift"

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from lburst.bench.reconstruction import run_benchmark
-from lburst.methods import method_slug
-from lburst.methods.learned import results_key
+from lburst.methods import Method, method_slug
 from lburst.sfm.metrics import aggregate, markdown_table, scene_metrics
 from lburst.sfm.result import ReconstructionResult
 
@@ -238,7 +237,7 @@ def test_benchmark_skips_a_finished_learned_run_whose_spec_got_the_scenes_keypoi
     from lburst.bench.reconstruction import KEY_FILE, run_key
 
     scene = _textured_scene(tmp_path / "scene")
-    out = tmp_path / "bench" / method_slug(results_key("lburst")) / scene.name
+    out = tmp_path / "bench" / Method.parse("lburst").slug() / scene.name
     done = ReconstructionResult(  # what reconstruct_scene saves for "lburst" on a scene: its 8,000 keypoints
         str(scene), "lburst,top_k=8000", str(out), ["0", "1", "2"], ["0", "1"], metrics={"registered_pct": 42.0}
     )
