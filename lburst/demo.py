@@ -17,13 +17,14 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from lburst.burst.io import atomic_path, load_burst, read_features_npz
-from lburst.methods import create
+from lburst.methods import Method
 from lburst.scenes.night_flight import NightFlightConfig, make_night_flight
 from lburst.sfm.metrics import markdown_table
 from lburst.sfm.options import ReconstructOptions
@@ -33,36 +34,26 @@ from lburst.viz import new_figure, plot_keypoints_and_maps
 from lburst.weights import weights_path
 
 
-def lburst_spec(weights: str | None) -> str:
+def lburst_method(weights: str | None) -> Method:
     """``lburst:W`` for given weights, else the shipped model (error if there is none)."""
     weights = weights or os.environ.get("LBURST_WEIGHTS")
     if weights:
-        return f"lburst:{weights}"
+        return Method("lburst", weights)
 
     weights_path("lburst-b5")  # raises a clear error when no weights are shipped
-    return "lburst"
+    return Method("lburst")
 
 
-def _label(spec: str) -> str:
-    """A readable label (table row, output folder) that tells specs apart: a checkpoint
-    path becomes its file stem, ``lburst:../RoBLo_N16_B5.pt,frame_order=published`` is
-    ``lburst-RoBLo_N16_B5-frame_order=published``."""
-    *merges, last = spec.split("+")
-    head, *options = last.split(",")
-    name, _, arg = head.partition(":")
-    parts = [name] + ([Path(arg).stem] if arg else []) + options
-    return "+".join(merges + ["-".join(parts)]).replace("/", "_").replace(":", "_")
-
-
-def method_labels(specs: list[str]) -> dict[str, str]:
-    """``_label`` of every spec, with 6 hex digits of the spec's SHA-1 added where two collide."""
+def method_labels(methods: Sequence[Method]) -> dict[Method, str]:
+    """:meth:`Method.label` of every method (a table row, an output folder), with 6 hex digits of
+    its spec's SHA-1 added where two collide."""
     import hashlib
 
-    labels = {spec: _label(spec) for spec in specs}
+    labels = {method: method.label() for method in methods}
     clashes = {lab for lab in labels.values() if list(labels.values()).count(lab) > 1}
     return {
-        spec: f"{lab}-{hashlib.sha1(spec.encode()).hexdigest()[:6]}" if lab in clashes else lab
-        for spec, lab in labels.items()
+        method: f"{lab}-{hashlib.sha1(str(method).encode()).hexdigest()[:6]}" if lab in clashes else lab
+        for method, lab in labels.items()
     }
 
 
@@ -128,7 +119,7 @@ def plot_trajectories(reference, results: dict, path: Path) -> None:
 
 def run_demo(
     out: Path,
-    methods: list[str],
+    methods: Sequence[str | Method],
     noise: str = "lowlight:moonless",
     bursts: int = 15,
     seed: int = 0,
@@ -145,15 +136,16 @@ def run_demo(
     print(f"[1/3] night flight: {cfg.n_bursts} bursts of {cfg.frames_per_burst} frames, noise {cfg.noise}")
     reference = make_night_flight(out / "scene", cfg)
     results, rows = {}, []
+    methods = [Method.of(method) for method in methods]
     labels = method_labels(methods)
-    for i, spec in enumerate(methods):
-        label = labels[spec]
-        print(f"[2/3] reconstruct with {spec} ({i + 1}/{len(methods)})")
+    for i, method in enumerate(methods):
+        label = labels[method]
+        print(f"[2/3] reconstruct with {method} ({i + 1}/{len(methods)})")
         # the drone's camera is calibrated: both methods get the true intrinsics, fixed, and
         # sequential pairs along the trajectory
         result = reconstruct_scene(
             out / "scene",
-            spec,
+            str(method),
             out / label,
             ReconstructOptions(
                 camera="reference", fix_intrinsics=True, pairs="sequential", overlap=overlap, matcher=matcher
@@ -171,8 +163,8 @@ def run_demo(
         kp_path = out / f"keypoints_{label}.png"
         feats = read_features_npz(Path(result.out_dir) / "features" / f"{show}.npz")
         maps = (None, None)
-        spec = next(s for s in methods if labels[s] == label)
-        model = getattr(create(spec), "model", None)  # a learned burst method: show its maps too
+        method = next(m for m in methods if labels[m] == label)
+        model = getattr(method.create(), "model", None)  # a learned burst method: show its maps too
         if isinstance(model, LBurst) and model.frames == len(burst):
             dense = model.dense(burst)
             maps = (dense["repeatability"], dense["reliability"])

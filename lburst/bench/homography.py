@@ -58,7 +58,7 @@ from lburst.burst.io import atomic_path
 from lburst.burst.motion import BurstMotion, sample_motion
 from lburst.errors import LBurstOSError, LBurstValueError
 from lburst.features import Features
-from lburst.methods import accepts, create, method_slug
+from lburst.methods import Method, method_slug
 from lburst.methods.merge import merge_burst
 from lburst.noise import GaussianNoise, NoiseModel, noise_from_spec
 from lburst.photometric import check_jitter
@@ -141,39 +141,46 @@ GOLD_CHECKPOINT = "gold:"
 
 @dataclass(frozen=True)
 class BenchMethod:
-    """A method of the benchmark: a method spec (:func:`lburst.methods.create`) and its input mode."""
+    """A method of the benchmark: a :class:`lburst.methods.Method` (or its spec) and its input mode."""
 
-    spec: str
+    method: Method
     mode: InputMode = InputMode.BURST
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "method", Method.of(self.method))
 
     @classmethod
     def parse(cls, text: str, mode: InputMode | str = InputMode.BURST) -> BenchMethod:
         """``MODE+SPEC`` (``gold+sift``, ``oracle-merge+r2d2:W.pt``), ``gold:CKPT`` (``gold+r2d2:CKPT``),
         or a plain ``SPEC`` in ``mode`` (the command line's ``--input``)."""
         if text.startswith(GOLD_CHECKPOINT):
-            return cls("r2d2:" + text[len(GOLD_CHECKPOINT) :], InputMode.GOLD)
+            return cls(Method.parse("r2d2:" + text[len(GOLD_CHECKPOINT) :]), InputMode.GOLD)
         for prefixed, prefix in MODE_PREFIX.items():
             if prefix and text.startswith(prefix):
-                return cls(text[len(prefix) :], prefixed)
+                return cls(Method.parse(text[len(prefix) :]), prefixed)
         try:
-            return cls(text, InputMode(mode))
+            plain = InputMode(mode)
         except ValueError:
             modes = ", ".join(m.value for m in InputMode)
             raise LBurstValueError(f"input mode {mode!r} is not one of {modes}") from None
+        return cls(Method.parse(text), plain)
+
+    @property
+    def gold_checkpoint(self) -> bool:
+        """The single-image network of a checkpoint on the clean image: written ``gold:CKPT``."""
+        return self.mode is InputMode.GOLD and self.method.name == "r2d2" and self.method.arg is not None
 
     @property
     def name(self) -> str:
         """The method's name in tables: as parsed back by :meth:`parse` (``gold:CKPT`` as published)."""
-        if self.mode is InputMode.GOLD and self.spec.startswith("r2d2:"):
-            return GOLD_CHECKPOINT + self.spec[len("r2d2:") :]
-        return MODE_PREFIX[self.mode] + self.spec
+        if self.gold_checkpoint:
+            return GOLD_CHECKPOINT + str(self.method).removeprefix("r2d2:")
+        return MODE_PREFIX[self.mode] + str(self.method)
 
     @property
     def key_prefix(self) -> str:
         """What the store's method spec is prefixed with (as the cache has always had it)."""
-        return (
-            GOLD_CHECKPOINT if self.mode is InputMode.GOLD and self.spec.startswith("r2d2:") else MODE_PREFIX[self.mode]
-        )
+        return GOLD_CHECKPOINT if self.gold_checkpoint else MODE_PREFIX[self.mode]
 
 
 class MethodRunner:
@@ -182,9 +189,9 @@ class MethodRunner:
     def __init__(self, method: BenchMethod | str, top_k: int) -> None:
         self.method_of = method if isinstance(method, BenchMethod) else BenchMethod.parse(method)
         self.spec, self.mode = self.method_of.name, self.method_of.mode
-        inner = self.method_of.spec
-        options = {"top_k": top_k} if accepts(inner, "top_k") else {}
-        self.extractor = create(inner, **options)
+        inner = self.method_of.method
+        options = {"top_k": top_k} if inner.accepts("top_k") else {}
+        self.extractor = inner.create(**options)
         method = store.method_key(inner, **options)  # the weights' SHA-1 and the options
         self.method = {**method, "spec": self.method_of.key_prefix + method["spec"]}
         self.key = self.method["spec"]  # names the feature cache's folder

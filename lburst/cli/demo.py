@@ -7,8 +7,9 @@ import argparse
 from pathlib import Path
 
 from lburst.cli.numbers import integer
-from lburst.cli.options import add_matcher_argument
-from lburst.demo import lburst_spec, run_demo
+from lburst.cli.options import add_matcher_argument, parse_method
+from lburst.demo import lburst_method, run_demo
+from lburst.methods import Method
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -22,11 +23,11 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bursts", type=integer(2), default=15)
     p.add_argument("--seed", type=integer(0), default=0)
     p.add_argument("--overlap", type=integer(1), default=4, help="match each burst with this many next ones")
-    p.add_argument("--methods", nargs="+", help="methods to compare (default: lburst and sift)")
+    p.add_argument("--methods", nargs="+", type=parse_method, help="methods to compare (default: lburst and sift)")
     add_matcher_argument(p)
 
 
 def main(args: argparse.Namespace) -> int:
-    methods = args.methods or [lburst_spec(args.weights), "sift"]
+    methods = args.methods or [lburst_method(args.weights), Method("sift")]
     run_demo(args.out, methods, args.noise, args.bursts, args.seed, args.overlap, args.matcher)
     return 0
