@@ -26,7 +26,7 @@ Differences from OpenCV's SIFT: the image is not doubled before the first octave
 the work for 81 slope images); the descriptor is SIFT's 4x4x8 histogram sampled on a
 rotated grid (:mod:`lburst.methods.sift_describe`), not OpenCV's code.
 
-Its speed: ``scripts/buff_speed.py`` (docs/results/matching.md).
+Its speed: docs/results/matching.md.
 
 Output (see :mod:`lburst.features`): ``keypoints`` in common-frame pixels, ``scales``
 SIFT-style diameters ``2 * sigma``, ``scores`` the interpolated |DoG| contrast,
