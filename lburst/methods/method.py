@@ -217,6 +217,10 @@ class Method:
         """The typed options of this level (``runtime`` joins those of the method that runs on
         the burst, overriding the spec's); ``LBurstValueError`` for a bad name, argument or option."""
         info = self.info()
+        if info.wraps and self.inner is None:
+            raise LBurstValueError(
+                f"method {self.name!r} wraps another method: write {self.name}+SPEC, e.g. {self.name}+sift"
+            )
         if info.wraps:
             return parse_options(info.options, self.given, self.name)
         if self.arg is not None and info.arg is None:

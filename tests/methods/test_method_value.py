@@ -261,6 +261,7 @@ def test_a_spec_that_breaks_the_grammar_is_one_line(spec, message):
         ("sift:x.pt", "method 'sift' takes no argument, got 'x.pt'"),
         ("sift,colour=red", "unknown options for method 'sift': colour; valid: "),
         ("merge+lburst,top_k=0", "method 'lburst': top_k must be an integer >= 1"),
+        ("merge,reduce=median", "method 'merge' wraps another method: write merge+SPEC, e.g. merge+sift"),
     ],
 )
 def test_names_and_values_are_checked_without_creating_anything(spec, message):
