@@ -1,5 +1,10 @@
 """lburst: learned features from low-light robotic bursts, and 3D reconstruction from them.
 
+Each command's work is a function here, which its command line only parses arguments for:
+``lburst.extract(bursts, out, method)`` (``lburst extract``, :mod:`lburst.extraction`) and
+``lburst.reconstruct(scene, method, out, ReconstructOptions(...))`` (``lburst reconstruct``,
+:func:`lburst.sfm.reconstruct.reconstruct_scene`).
+
 The public names below are imported on first use, so ``import lburst`` (and the COLMAP
 child processes, which import ``lburst.sfm``) do not pay for torch until it is needed.
 """
@@ -25,6 +30,11 @@ _EXPORTS = {
     "load_burst": "lburst.burst.io",
     "save_burst": "lburst.burst.io",
     "simulate_burst": "lburst.simulate",
+    "extract": "lburst.extraction",
+    "ExtractReport": "lburst.extraction",
+    "reconstruct": "lburst.sfm.reconstruct:reconstruct_scene",
+    "ReconstructOptions": "lburst.sfm.options",
+    "ReconstructionResult": "lburst.sfm.result",
 }
 _MODULES = ("methods", "matching", "noise", "simulate", "burst", "match", "model")
 
@@ -32,8 +42,9 @@ __all__ = sorted(_EXPORTS) + list(_MODULES)
 
 
 def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    if name in _EXPORTS:  # "module" (the same name there) or "module:name"
+        module, _, attr = _EXPORTS[name].partition(":")
+        return getattr(importlib.import_module(module), attr or name)
     if name in _MODULES:
         return importlib.import_module(f"lburst.{name}")
     raise AttributeError(f"module 'lburst' has no attribute {name!r}")
