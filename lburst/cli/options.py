@@ -94,16 +94,20 @@ def parse_method(spec: str) -> Method:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_matcher_argument(parser) -> None:
-    """``--matcher SPEC`` on a command's parser, checked before the command starts."""
+def matcher_kwargs() -> dict:
+    """``add_argument``'s keywords of ``--matcher SPEC``, checked before the command starts."""
     names = ", ".join(m.name for m in available())
-    parser.add_argument(
-        "--matcher",
+    return dict(
         type=matcher_spec,
         default=DEFAULT,
         help=f"how to match descriptors: {names}, with options as NAME,KEY=VALUE "
         f"(default {DEFAULT}; `lburst methods` lists them)",
     )
+
+
+def add_matcher_argument(parser) -> None:
+    """``--matcher SPEC`` (:func:`matcher_kwargs`) on a command's parser."""
+    parser.add_argument("--matcher", **matcher_kwargs())
 
 
 def color_jitter_kwargs(help: str, default: tuple[float, ...] | None = None) -> dict:
