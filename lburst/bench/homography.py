@@ -165,6 +165,13 @@ class BenchMethod:
             raise LBurstValueError(f"input mode {mode!r} is not one of {modes}") from None
         return cls(Method.parse(text), plain)
 
+    @classmethod
+    def of(cls, method: str | Method | BenchMethod) -> BenchMethod:
+        """``method`` itself, a :class:`Method` on the noisy burst, or the text of a method (:meth:`parse`)."""
+        if isinstance(method, BenchMethod):
+            return method
+        return cls(method) if isinstance(method, Method) else cls.parse(method)
+
     @property
     def gold_checkpoint(self) -> bool:
         """The single-image network of a checkpoint on the clean image: written ``gold:CKPT``."""
@@ -186,8 +193,8 @@ class BenchMethod:
 class MethodRunner:
     """Features of one image under the protocol for one benchmark method."""
 
-    def __init__(self, method: BenchMethod | str, top_k: int) -> None:
-        self.method_of = method if isinstance(method, BenchMethod) else BenchMethod.parse(method)
+    def __init__(self, method: BenchMethod | Method | str, top_k: int) -> None:
+        self.method_of = BenchMethod.of(method)
         self.spec, self.mode = self.method_of.name, self.method_of.mode
         inner = self.method_of.method
         options = {"top_k": top_k} if inner.accepts("top_k") else {}
@@ -279,7 +286,7 @@ def summarize(per_pair: dict[str, list[dict]], seconds: dict[str, float], kinds:
 
 def run_homography_benchmark(
     data: str | Path,
-    methods: list[str | BenchMethod],
+    methods: list[str | Method | BenchMethod],
     sigmas: list[float],
     out: str | Path,
     noise_specs: list[str] = (),

@@ -329,6 +329,12 @@ def test_the_homography_benchmark_reads_its_methods_as_before(text, spec, mode, 
     )
 
 
+def test_the_homography_benchmark_takes_a_method_or_its_text():
+    method = Method.parse("merge+sift")
+    assert BenchMethod.of(method) == BenchMethod.of("merge+sift") == BenchMethod(method, InputMode.BURST)
+    assert BenchMethod.of("gold+sift") == BenchMethod(Method("sift"), InputMode.GOLD)
+
+
 # --- the grammar is read only in lburst/methods/ ----------------------------------------------
 
 ROOT = Path(lburst.__file__).parent
