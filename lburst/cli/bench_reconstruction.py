@@ -24,7 +24,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="method specs (a learned method keeps 8000 keypoints per image unless the spec sets top_k=N)",
     )
     parser.add_argument("--out", required=True, help="output folder: OUT/<method>/<scene>/, table.md, results.json")
-    parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential"), default="auto")
+    parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential", "positions"), default="auto")
     parser.add_argument(
         "--overlap",
         type=integer(1),

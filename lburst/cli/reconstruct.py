@@ -15,6 +15,8 @@ from lburst.sfm.metrics import markdown_table
 from lburst.sfm.options import (
     AUTO_EXHAUSTIVE_MAX,
     LOOP_FRACTION,
+    POSITION_NEIGHBOURS,
+    POSITION_RADIUS_M,
     RECORDING_ABS_POSE_INLIERS,
     RECORDING_NEAR,
     RECORDING_OVERLAP,
@@ -51,10 +53,26 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--pairs",
-        choices=("auto", "exhaustive", "sequential"),
+        choices=("auto", "exhaustive", "sequential", "positions"),
         default="auto",
-        help=f"image pairs to match (auto: for a scene exhaustive up to {AUTO_EXHAUSTIVE_MAX} images, "
-        "for a recording always sequential with retrieval loop candidates)",
+        help=f"image pairs to match (auto: for a scene exhaustive up to {AUTO_EXHAUSTIVE_MAX} images, beyond by "
+        "positions where the images have them, else sequential; for a recording always sequential with retrieval "
+        "loop candidates; positions: each image with its --pair-neighbours nearest images by position within "
+        "--pair-radius). Where the positions show views turned by over 90 degrees against the views they are "
+        "paired with (survey lines flown both ways), a learned method extracts with rotations=2 unless its spec "
+        "sets rotations (rotations=1: upright only)",
+    )
+    parser.add_argument(
+        "--pair-neighbours",
+        type=integer(1),
+        metavar="K",
+        help=f"--pairs positions: nearest images of each (default {POSITION_NEIGHBOURS})",
+    )
+    parser.add_argument(
+        "--pair-radius",
+        type=real(0, None, low_open=True),
+        metavar="M",
+        help=f"--pairs positions: only images within this many metres (default {POSITION_RADIUS_M:g})",
     )
     parser.add_argument(
         "--overlap",
@@ -170,6 +188,8 @@ def main(args: argparse.Namespace) -> int:
         ReconstructOptions(
             pairs=args.pairs,
             overlap=args.overlap,
+            neighbours=args.pair_neighbours,
+            radius=args.pair_radius,
             fallback_exhaustive=args.fallback_exhaustive,
             mapper=args.mapper,
             camera=args.camera,

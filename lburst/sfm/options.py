@@ -10,6 +10,7 @@ from pathlib import Path
 from lburst.burst.sources import RecordingOptions
 from lburst.cluster.spec import ClusterSpec, parse_cluster
 from lburst.errors import LBurstValueError
+from lburst.numbers import check_integer, check_real
 from lburst.sfm.colmap import DEFAULT_THREADS
 from lburst.sfm.positions import DEFAULT_STD_M, check_std
 from lburst.strenum import StrEnum
@@ -29,14 +30,20 @@ RECORDING_ABS_POSE_INLIERS = 10
 # 100, 300 and 1000 keyframes it mapped 14.5-15 % of the path off, against 0.76, 3.19 and 1.78 % for
 # the incremental mapper (docs/large_surveys.md), so auto does not pick it at any size measured
 GLOBAL_MAPPER_FROM: int | None = None
+# pairs='positions' (lburst.sfm.pairs.position_pairs): each image with its POSITION_NEIGHBOURS nearest images by
+# position within POSITION_RADIUS_M metres; pairs='auto' picks it for a scene of more than AUTO_EXHAUSTIVE_MAX
+# images whose positions are known (docs/large_surveys.md has the measurements)
+POSITION_NEIGHBOURS = 10
+POSITION_RADIUS_M = 100.0
 
 
 class Pairs(StrEnum):
     """Which image pairs to match (:func:`lburst.sfm.pairs.pair_plan`)."""
 
-    AUTO = "auto"  # a scene: exhaustive up to AUTO_EXHAUSTIVE_MAX images, else sequential; a recording: sequential
+    AUTO = "auto"  # a scene: exhaustive up to AUTO_EXHAUSTIVE_MAX images, else by positions or sequential
     EXHAUSTIVE = "exhaustive"
     SEQUENTIAL = "sequential"
+    POSITIONS = "positions"  # the nearest images by position (lburst.sfm.pairs.position_pairs)
 
 
 class Camera(StrEnum):
@@ -70,8 +77,12 @@ class ReconstructOptions:
 
     Attributes:
         pairs: :class:`Pairs` (or its value): ``'exhaustive'``, ``'sequential'`` (neighbours
-            up to ``overlap`` apart) or ``'auto'`` (a scene: exhaustive up to 20 images, else
-            sequential; a recording: always sequential, :func:`lburst.sfm.pairs.pair_plan`).
+            up to ``overlap`` apart), ``'positions'`` (each image with its ``neighbours`` nearest
+            images by position within ``radius``: :func:`lburst.sfm.pairs.position_pairs`) or
+            ``'auto'`` (a scene: exhaustive up to 20 images, else by positions when they are
+            known, else sequential; a recording: always sequential, :func:`lburst.sfm.pairs.pair_plan`).
+        neighbours, radius: ``pairs='positions'``: how many nearest images (``None``: 10) within
+            how many metres (``None``: 100).
         overlap: sequential pairs' reach; ``None``: 10 for a scene, 2 for a recording.
         fallback_exhaustive: rerun with every pair when sequential pairs leave images out.
         camera (:class:`Camera`), camera_model, single_camera, fix_intrinsics: cameras
@@ -119,6 +130,8 @@ class ReconstructOptions:
 
     pairs: Pairs = Pairs.AUTO
     overlap: int | None = None
+    neighbours: int | None = None
+    radius: float | None = None
     fallback_exhaustive: bool = False
     camera: Camera = Camera.AUTO
     camera_model: str = "SIMPLE_RADIAL"
@@ -146,6 +159,10 @@ class ReconstructOptions:
     def __post_init__(self) -> None:
         self.position_std = check_std(self.position_std)
         self.pairs = _enum(Pairs, self.pairs, "pairing")
+        if self.neighbours is not None:
+            self.neighbours = check_integer(self.neighbours, "--pair-neighbours", 1)
+        if self.radius is not None:
+            self.radius = check_real(self.radius, "--pair-radius (m)", 0, low_open=True)
         self.camera = _enum(Camera, self.camera, "camera option")
         self.mapper = _enum(Mapper, self.mapper, "mapper")
         if self.positions is not None and self.mapper == Mapper.GLOBAL:
