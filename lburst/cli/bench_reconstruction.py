@@ -8,11 +8,9 @@ from pathlib import Path
 from lburst.bench.reconstruction import run_benchmark
 from lburst.burst.io import atomic_path
 from lburst.cli.numbers import integer
-from lburst.cli.options import add_matcher_argument
+from lburst.cli.reconstruct_options import BENCH_OPTIONS, add_reconstruct_arguments, bench_options
 from lburst.scenes.reference_spread import summary
-from lburst.sfm.colmap import DEFAULT_THREADS
 from lburst.sfm.metrics import markdown_table, seed_table
-from lburst.sfm.options import RECORDING_OVERLAP, SCENE_OVERLAP
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -24,34 +22,6 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="method specs (a learned method keeps 8000 keypoints per image unless the spec sets top_k=N)",
     )
     parser.add_argument("--out", required=True, help="output folder: OUT/<method>/<scene>/, table.md, results.json")
-    parser.add_argument("--pairs", choices=("auto", "exhaustive", "sequential", "positions"), default="auto")
-    parser.add_argument(
-        "--overlap",
-        type=integer(1),
-        help=f"sequential pairs: neighbours on each side (default {SCENE_OVERLAP} for a scene, "
-        f"{RECORDING_OVERLAP} for a recording, as in lburst reconstruct)",
-    )
-    parser.add_argument("--fallback-exhaustive", action="store_true")
-    parser.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
-    parser.add_argument(
-        "--camera",
-        choices=("auto", "default", "reference", "reference-focal"),
-        default="auto",
-        help="intrinsics prior, as in lburst reconstruct; reference-focal: COLMAP's default camera "
-        "(SIMPLE_RADIAL, centred) at the reference.json cameras' focal length, refined unless --fix-intrinsics",
-    )
-    parser.add_argument(
-        "--fix-intrinsics",
-        action="store_true",
-        help="hold the cameras' intrinsics fixed (with --camera reference: the scenes' calibration)",
-    )
-    parser.add_argument(
-        "--single-camera",
-        action="store_const",
-        const=True,
-        help="one camera for all images of a scene (a recording has one by default)",
-    )
-    parser.add_argument("--threads", type=integer(1, 1024), default=DEFAULT_THREADS)
     parser.add_argument(
         "--seeds",
         nargs="+",
@@ -66,8 +36,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="read the features of another benchmark's output folder (OTHER/<method>/<scene>/features) where "
         "they are of the same method and bursts, e.g. to run a second camera protocol without extracting again",
     )
-    add_matcher_argument(parser)
     parser.add_argument("--force", action="store_true", help="rerun finished (method, scene) pairs")
+    reconstruction = parser.add_argument_group("each run's reconstruction (as in lburst reconstruct)")
+    add_reconstruct_arguments(reconstruction, BENCH_OPTIONS)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -78,15 +49,7 @@ def main(args: argparse.Namespace) -> int:
         force=args.force,
         seeds=args.seeds,
         features_from=args.features_from,
-        pairs=args.pairs,
-        overlap=args.overlap,
-        fallback_exhaustive=args.fallback_exhaustive,
-        mapper=args.mapper,
-        camera=args.camera,
-        single_camera=args.single_camera,
-        **({"fix_intrinsics": True} if args.fix_intrinsics else {}),  # unset: the key of earlier runs
-        num_threads=args.threads,
-        matcher=args.matcher,
+        **bench_options(args),
     )
     rows = report["rows"]
     if len(report["seeds"]) > 1:  # one row per run: say which seed

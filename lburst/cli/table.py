@@ -36,7 +36,9 @@ def add_options(parser, options: Iterable[Option]) -> None:
     for option in options:
         target = parser
         if option.group is not None:
-            target = groups.setdefault(option.group, parser.add_mutually_exclusive_group())
+            if option.group not in groups:
+                groups[option.group] = parser.add_mutually_exclusive_group()
+            target = groups[option.group]
         target.add_argument(option.flag, **option.kwargs)
 
 
