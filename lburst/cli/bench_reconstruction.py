@@ -8,6 +8,7 @@ from pathlib import Path
 from lburst.bench.reconstruction import run_benchmark
 from lburst.burst.io import atomic_path
 from lburst.cli.numbers import integer
+from lburst.cli.options import parse_method
 from lburst.cli.reconstruct_options import BENCH_OPTIONS, add_reconstruct_arguments, bench_options
 from lburst.scenes.reference_spread import summary
 from lburst.sfm.metrics import markdown_table, seed_table
@@ -18,6 +19,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--methods",
         nargs="+",
+        type=parse_method,
         default=["sift", "merge+sift", "lburst"],
         help="method specs (a learned method keeps 8000 keypoints per image unless the spec sets top_k=N)",
     )
