@@ -18,12 +18,8 @@ from typing import Callable, Protocol
 import numpy as np
 
 from lburst.errors import LBurstValueError
+from lburst.normalization import IMAGENET_MEAN, IMAGENET_STD  # noqa: F401  (re-exported: gaussian-var:V is in that space)
 from lburst.numbers import check_real
-
-#: The network's input normalisation (RGB on 0..1): ImageNet's mean and std.  Kept here,
-#: free of torch, because ``gaussian-var:V`` noise is a variance in that normalised space.
-IMAGENET_MEAN = (0.485, 0.456, 0.406)
-IMAGENET_STD = (0.229, 0.224, 0.225)
 
 #: the largest standard deviation of ``gaussian:STD`` on the 0..255 scale: 40 times the whole
 #: range, far past noise that leaves nothing of the image (float32 would overflow near 1e38)

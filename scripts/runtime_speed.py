@@ -85,10 +85,12 @@ def _load_net(args: argparse.Namespace):
 
 def build(args: argparse.Namespace, net, meta: dict, threads: int, workdir: Path, shared: dict) -> dict:
     """``{name: (LBurst, extract options, setup seconds)}`` for the runtimes asked for, at ``threads``."""
+    from lburst import calibration
+    from lburst.model import openvino as ov
     from lburst.model import runtimes as rt
     from lburst.model.extractor import LBurst
     from lburst.model.network import LBurstNet, NetConfig
-    from lburst.model.onnx import OnnxRunner, export_network_onnx
+    from lburst.model.onnx import OnnxRunner, export_network_onnx, quantize_onnx
 
     models: dict[str, tuple] = {}
     torch.manual_seed(0)
@@ -104,7 +106,7 @@ def build(args: argparse.Namespace, net, meta: dict, threads: int, workdir: Path
         else:
             if name.endswith("int8") and "calibration" not in shared:
                 t0 = time.perf_counter()
-                shared["calibration"] = rt.calibration_bursts(
+                shared["calibration"] = calibration.calibration_bursts(
                     args.photos, count=args.calibration, frames=frames, seed=args.seed
                 )
                 shared["calibration_s"] = time.perf_counter() - t0
@@ -117,23 +119,23 @@ def build(args: argparse.Namespace, net, meta: dict, threads: int, workdir: Path
                 if name == "onnxruntime-int8":
                     if "onnx_int8" not in shared:
                         t0 = time.perf_counter()
-                        shared["onnx_int8"] = rt.quantize_onnx(path, workdir / "model-int8.onnx", shared["calibration"])
+                        shared["onnx_int8"] = quantize_onnx(path, workdir / "model-int8.onnx", shared["calibration"])
                         shared["quantize_onnx_s"] = time.perf_counter() - t0
                     path = shared["onnx_int8"]
                 runner = OnnxRunner(path, threads=threads)
             else:
                 if "ov" not in shared:
                     t0 = time.perf_counter()
-                    shared["ov"] = rt.openvino_model(net, meta)
+                    shared["ov"] = ov.openvino_model(net, meta)
                     shared["convert_openvino_s"] = time.perf_counter() - t0
                 model = shared["ov"]
                 if name == "openvino-int8":
                     if "ov_int8" not in shared:
                         t0 = time.perf_counter()
-                        shared["ov_int8"] = rt.quantize_openvino(model, shared["calibration"])
+                        shared["ov_int8"] = ov.quantize_openvino(model, shared["calibration"])
                         shared["quantize_openvino_s"] = time.perf_counter() - t0
                     model = shared["ov_int8"]
-                runner = rt.OpenVinoRunner(
+                runner = ov.OpenVinoRunner(
                     model, threads=threads, precision="bf16" if name == "openvino-bf16" else "fp32"
                 )
             model, options = LBurst(None, runner=runner, frames=frames), {}

@@ -8,6 +8,7 @@ from typing import Literal
 
 import numpy as np
 
+from lburst.calibration import training_calibration
 from lburst.errors import LBurstValueError
 from lburst.features import Features, concatenate, select, spread_top_k
 from lburst.methods import register
@@ -122,10 +123,16 @@ class LearnedExtractor:
 def _make(arg: str | None, default: str, options: LearnedOptions) -> LearnedExtractor:
     model = (
         LBurst.from_checkpoint(
-            resolve_weights(arg), device=options.device, frame_order=options.frame_order, runtime=options.runtime
+            resolve_weights(arg),
+            device=options.device,
+            frame_order=options.frame_order,
+            runtime=options.runtime,
+            calibration=training_calibration,
         )
         if arg
-        else LBurst.pretrained(default, device=options.device, runtime=options.runtime)
+        else LBurst.pretrained(
+            default, device=options.device, runtime=options.runtime, calibration=training_calibration
+        )
     )
     return LearnedExtractor(model, options.top_k, options.rotations, options.spread, **options.multiscale())
 

@@ -46,7 +46,7 @@ from lburst.model.precision import (  # noqa: F401  (re-exported)
     check_precision,
     cpu_flags,
 )
-from lburst.noise import IMAGENET_MEAN, IMAGENET_STD
+from lburst.normalization import IMAGENET_MEAN, IMAGENET_STD
 
 #: Class name written into checkpoints, as in the published files.
 NET_NAME = "Fast_Quad_L2Net_ConfCFS"

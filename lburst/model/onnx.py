@@ -11,22 +11,26 @@ The exported graph is the inference form's ``core`` with input ``burst`` ``(1, 3
   apart by its size, :func:`lburst.model.fast.descriptor_stride`).
 
 :class:`OnnxRunner` pads odd sizes exactly as the torch path does, so :class:`lburst.LBurst`
-runs either.  Other runtimes of the exported graph (OpenVINO, int8): :mod:`lburst.model.runtimes`.
+runs either; :func:`quantize_onnx` makes its int8 form.  The OpenVINO runtime of the same graph:
+:mod:`lburst.model.openvino`; how a runtime is chosen: :mod:`lburst.model.runtimes`.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import shutil
+import tempfile
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import numpy as np
 import torch
 
 from lburst.burst.io import atomic_path
+from lburst.errors import LBurstValueError
 from lburst.extras import require
 from lburst.model.fast import CoreModule, FastLBurstNet, pad_maps
 from lburst.model.lite import LiteNet
@@ -201,3 +205,53 @@ class OnnxRunner:
         arrays = self.session.run(None, {INPUT_NAME: x.contiguous().cpu().numpy()})
         rep, rel, half = (torch.from_numpy(a) for a in arrays)
         return pad_maps(rep, rel, x.shape[-2:]) + (half,)
+
+
+class _Reader:
+    """ONNX Runtime's ``CalibrationDataReader`` protocol over a list of inputs."""
+
+    def __init__(self, items: Sequence[np.ndarray]) -> None:
+        self._items = iter(items)
+
+    def get_next(self) -> dict[str, np.ndarray] | None:
+        item = next(self._items, None)
+        return None if item is None else {INPUT_NAME: item}
+
+
+def quantize_onnx(onnx_path: str | Path, out: str | Path, calibration: Sequence[torch.Tensor]) -> Path:
+    """ONNX Runtime static quantisation of the exported graph ``onnx_path`` to ``out``: QDQ
+    format, int8 weights per channel, uint8 activations with MinMax ranges calibrated on
+    ``calibration`` (normalised inputs ``(1, 3N, H, W)``); the ``lburst.*`` metadata is kept."""
+    onnx = require("onnx", "ONNX Runtime int8 quantisation")
+    require("onnxruntime", "ONNX Runtime int8 quantisation")
+    from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+
+    items = [np.ascontiguousarray(x.detach().cpu().numpy(), dtype=np.float32) for x in calibration]
+    if not items:
+        raise LBurstValueError("no calibration data")
+    out = Path(out)
+    work = Path(tempfile.mkdtemp(prefix="lburst-quant-"))
+    try:
+        prepared = work / "prepared.onnx"
+        quant_pre_process(str(onnx_path), str(prepared), skip_symbolic_shape=True)
+        with atomic_path(out) as tmp:
+            quantize_static(
+                str(prepared),
+                str(tmp),
+                _Reader(items),
+                quant_format=QuantFormat.QDQ,
+                per_channel=True,
+                activation_type=QuantType.QUInt8,
+                weight_type=QuantType.QInt8,
+                calibrate_method=CalibrationMethod.MinMax,
+                # not CalibMaxIntermediateOutputs: onnxruntime 1.32 drops the outputs it flushes
+            )
+            source, model = onnx.load(str(onnx_path)), onnx.load(str(tmp))
+            del model.metadata_props[:]
+            for entry in source.metadata_props:
+                model.metadata_props.add(key=entry.key, value=entry.value)
+            onnx.save(model, str(tmp))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return out

@@ -25,7 +25,7 @@ def test_frames_resized_first_give_the_features_of_the_full_resolution_input(dty
     assert scale < 1 and max(x.shape[-2:]) <= 64
     with torch.inference_mode():
         full = normalize_burst(burst, "cpu")
-        expected = model._extract(full, MultiScaleConfig(top_k=300, **options))
+        expected = model._detector().detect(full, MultiScaleConfig(top_k=300, **options))
     assert len(got["keypoints"]) == len(expected["keypoints"]) > 100
     np.testing.assert_allclose(got["scores"], expected["scores"], atol=1e-5)
 

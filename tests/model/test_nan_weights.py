@@ -64,7 +64,7 @@ def test_a_good_onnx_export_still_loads_and_gives_finite_maps(exports):
 
 def test_openvino_refuses_nan_weights_from_a_file_or_a_network(exports):
     pytest.importorskip("openvino")
-    from lburst.model.runtimes import OpenVinoRunner
+    from lburst.model.openvino import OpenVinoRunner
 
     with pytest.raises(CheckpointError, match=rf"nan.onnx: {NAN_WEIGHTS}"):
         OpenVinoRunner(exports["nan"])
