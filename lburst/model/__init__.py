@@ -3,10 +3,16 @@
 - :mod:`lburst.model.network`: :class:`LBurstNet`, its configuration and checkpoints
   (the published layout), input normalisation, precision and device checks;
 - :mod:`lburst.model.fast`: :class:`FastLBurstNet`, the inference-only form with the
-  same outputs;
-- :mod:`lburst.model.extractor`: :class:`LBurst`, multi-scale keypoints and
-  descriptors of a burst (``LBurst.pretrained(...)``, ``model.extract(burst)``);
-- :mod:`lburst.model.onnx`: ONNX export and the ONNX Runtime backend.
+  same outputs; :mod:`lburst.model.lite`: the light network;
+- :mod:`lburst.model.runtimes`: the typed runtime (torch, ONNX Runtime, OpenVINO and their
+  precisions), chosen per CPU; :mod:`lburst.model.backend`: the backend that runs the network
+  on it; :mod:`lburst.model.onnx`, :mod:`lburst.model.openvino`: export, runners, int8;
+- :mod:`lburst.model.detector`: multi-scale keypoints and descriptors over a backend;
+- :mod:`lburst.model.extractor`: :class:`LBurst`, the two together
+  (``LBurst.pretrained(...)``, ``model.extract(burst)``).
+
+The int8 runtimes are calibrated on bursts their caller gives (:mod:`lburst.calibration`):
+nothing here imports the simulator.
 """
 
 from __future__ import annotations

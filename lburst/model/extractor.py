@@ -235,20 +235,33 @@ class LBurst:
             count = net.config.frames if net is not None else int(frames)
             backend = RunnerBackend(runner, type(runner).__name__, count, net, device)
         self.backend = backend
+        self.net, self.frames, self.runtime = backend.net, backend.frames, backend.name  # the network and its runtime
+        self.descriptor_dim = backend.descriptor_dim  # D, the descriptors' size
         self.pad = 0 if pad is None else check_pad(pad)
         self.frame_order = frame_order
         self.align = bool(align) and self.frames > 1
         self._perm = frame_permutation(self.frames, frame_order)
-        self.whitening = Whitening(descriptor_mean, descriptor_whitening, device)
+        self.whitening = Whitening(descriptor_mean, descriptor_whitening, backend.device)
 
-    net = property(lambda self: self.backend.net, doc="The torch network (``None`` when only a runner runs it).")
-    frames = property(lambda self: self.backend.frames, doc="N, the frames of the bursts the network takes.")
-    runtime = property(lambda self: self.backend.name, doc="The name of the runtime that runs the network.")
-    device = property(lambda self: self.backend.device, doc="The torch device of the network (:meth:`to`).")
-    descriptor_dim = property(lambda self: self.backend.descriptor_dim, doc="D, the descriptors' size.")
-    fast_net = property(lambda self: self.backend.runner, doc="What runs the network in fp32: ``x -> maps``.")
-    descriptor_mean = property(lambda self: self.whitening.mean, doc="(D,) mean of the descriptor whitening.")
-    descriptor_whitening = property(lambda self: self.whitening.matrix, doc="(D, D) descriptor whitening.")
+    @property
+    def device(self) -> torch.device:
+        """The torch device the network runs on (set at construction, changed by :meth:`to`)."""
+        return self.backend.device
+
+    @property
+    def fast_net(self) -> Runner:
+        """What runs the network in fp32 (built on first use): ``x -> (rep, rel, raw descriptor map)``."""
+        return self.backend.runner
+
+    @property
+    def descriptor_mean(self) -> torch.Tensor | None:
+        """(D,) mean of the descriptor whitening on :attr:`device` (``None`` without one)."""
+        return self.whitening.mean
+
+    @property
+    def descriptor_whitening(self) -> torch.Tensor | None:
+        """(D, D) matrix of the descriptor whitening on :attr:`device` (``None`` without one)."""
+        return self.whitening.matrix
 
     def to(self, device: str | torch.device) -> LBurst:
         """Move the network and the descriptor whitening to ``device`` (``'cuda'``, ``'cpu'``,

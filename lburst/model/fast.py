@@ -54,10 +54,10 @@ def fold_batchnorm(ops: nn.ModuleList) -> nn.Sequential:
 
 
 #: bytes of the largest map of a stripe of the full-resolution layers (32 rows of a
-#: 1024-wide 64-channel map): a stripe's maps then stay in this CPU's L3 cache
+#: 1024-wide 64-channel map): a stripe's maps then stay in an L3 cache of that size
 STRIPE_BYTES = 8 << 20
 #: input bytes per band of the head computation (8 rows of a 512-wide 128-D half map):
-#: the band's upsampled map (4x that) then fits in this CPU's L2 and L3 caches
+#: the band's upsampled map (4x that) then fits in the L2 and L3 caches
 HEAD_BAND_BYTES = 2 << 20
 
 
@@ -238,7 +238,7 @@ def descriptors_at(half: torch.Tensor, y: torch.Tensor, x: torch.Tensor, stride:
 def _rows(m: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     """Descriptors (K, D) at flat pixel ``index`` of the map ``m`` (D, h, w), gathered in
     whichever memory layout ``m`` has (a gather of whole rows on channels-last maps, of
-    columns on channels-first ones: 4-8x faster than indexing ``m[:, y, x]``)."""
+    columns on channels-first ones), which is faster than indexing ``m[:, y, x]`` (docs/speed.md)."""
     pixels = m.permute(1, 2, 0)
     if pixels.is_contiguous():
         return pixels.reshape(-1, m.shape[0])[index]

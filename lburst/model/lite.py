@@ -23,10 +23,8 @@ The repeatability is predicted per full-resolution pixel (pixel shuffle), not up
 from half resolution: the 3x3 maxima of a bilinearly upsampled map fall between two
 pixels, which would cost keypoint localisation.
 
-Wide maps at half resolution are what costs on a CPU: upsampling and squaring the
-128-channel half map alone took 165 ms for a 1024x768 burst on a 2-core AMD EPYC, more
-than the whole light backbone.  Descriptors are therefore kept at quarter resolution and
-interpolated only at the keypoints.
+Descriptors are kept at quarter resolution and interpolated only at the keypoints: wide
+maps at half resolution are what costs on a CPU (docs/speed.md, "The light network's design").
 
 Inference form (:meth:`LiteNet.core`, what :class:`lburst.LBurst` and the ONNX export run):
 ``(repeatability, reliability, descriptor map)`` as :meth:`lburst.model.fast.FastLBurstNet.core`,

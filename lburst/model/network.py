@@ -55,8 +55,7 @@ NET_NAME = "Fast_Quad_L2Net_ConfCFS"
 def training_memory_format(device: torch.device | str, name: str = "auto") -> torch.memory_format:
     """The memory format for training the network: ``channels_last``, ``contiguous``, or
     ``auto``: channels-last on CUDA and on CPUs with AVX-512, contiguous on CPUs without
-    it (on a 2-core AVX2 AMD EPYC, one thread, a 5-frame batch of 8 x 192 px: forward +
-    backward 17.4 s channels-last, 13.6 s contiguous; ``scripts/train_speed.py``)."""
+    it, where it trains faster (docs/training.md, "Continuing on another CPU")."""
     formats = {"channels_last": torch.channels_last, "contiguous": torch.contiguous_format}
     if name == "auto":
         flags = cpu_flags()
