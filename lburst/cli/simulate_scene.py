@@ -9,6 +9,7 @@ from lburst.cli.numbers import integer, real
 from lburst.errors import LBurstValueError, RunFailed
 from lburst.scenes.photo_scene import REFERENCE_DIR, REFERENCE_SOURCE, photo_set, simulate_scene
 from lburst.scenes.reference_spread import load_spread, summary
+from lburst.sfm.colmap import DEFAULT_THREADS
 from lburst.sfm.scene import list_scene
 
 
@@ -42,7 +43,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--reference-threads",
         type=integer(1, 1024),
-        default=2,
+        default=DEFAULT_THREADS,
         help="COLMAP threads for the reference reconstruction (its result depends on them)",
     )
     parser.add_argument(
