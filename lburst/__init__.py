@@ -3,7 +3,8 @@
 Each command's work is a function here, which its command line only parses arguments for:
 ``lburst.extract(bursts, out, method)`` (``lburst extract``, :mod:`lburst.extraction`) and
 ``lburst.reconstruct(scene, method, out, ReconstructOptions(...))`` (``lburst reconstruct``,
-:func:`lburst.sfm.reconstruct.reconstruct_scene`).
+:func:`lburst.sfm.reconstruct.reconstruct_scene`); a ``method`` is a spec such as ``'lburst'`` or
+``'merge+sift'``, or the :class:`lburst.Method` parsed from one (``lburst.Method.parse(spec)``).
 
 The public names below are imported on first use, so ``import lburst`` (and the COLMAP
 child processes, which import ``lburst.sfm``) do not pay for torch until it is needed.
@@ -35,6 +36,7 @@ _EXPORTS = {
     "reconstruct": "lburst.sfm.reconstruct:reconstruct_scene",
     "ReconstructOptions": "lburst.sfm.options",
     "ReconstructionResult": "lburst.sfm.result",
+    "Method": "lburst.methods",
 }
 _MODULES = ("methods", "matching", "noise", "simulate", "burst", "match", "model")
 

@@ -271,7 +271,7 @@ def test_the_import_graph_sees_importlib_imports(tmp_path, monkeypatch):
 DYNAMIC_IMPORTS = {
     "lburst": "its public names load on first use (_EXPORTS)",
     "lburst.sfm": "its public names load on first use (_EXPORTS)",
-    "lburst.methods": "each method's module registers it when first asked for (_PROVIDERS)",
+    "lburst.methods.registry": "each method's module registers it when first asked for (_PROVIDERS)",
     "lburst.cli": "each subcommand's module (COMMANDS), imported when it runs",
     "lburst.extras": "optional dependencies, by the name a caller asks for",
 }
