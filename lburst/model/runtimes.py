@@ -40,23 +40,29 @@ from lburst.model.onnx import OnnxRunner, export_network_onnx, quantize_onnx
 from lburst.model.openvino import OpenVinoRunner, openvino_model, quantize_openvino
 from lburst.model.precision import NATIVE_BF16_FLAGS, cpu_flags
 
-#: the precisions of each engine, and the packages it needs beyond lburst's own dependencies
-ENGINES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "torch": (("fp32", "bf16"), ()),
-    "onnxruntime": (("fp32", "int8"), ("onnx", "onnxscript", "onnxruntime")),
-    "openvino": (("fp32", "bf16", "int8"), ("openvino",)),
+#: the precisions each engine runs the network in
+PRECISIONS: dict[str, tuple[str, ...]] = {
+    "torch": ("fp32", "bf16"),
+    "onnxruntime": ("fp32", "int8"),
+    "openvino": ("fp32", "bf16", "int8"),
+}
+#: the packages each engine needs beyond lburst's own dependencies
+PACKAGES: dict[str, tuple[str, ...]] = {
+    "torch": (),
+    "onnxruntime": ("onnx", "onnxscript", "onnxruntime"),
+    "openvino": ("openvino",),
 }
 
 
 @dataclass(frozen=True)
 class Runtime:
-    """A runtime of the network: an ``engine`` of :data:`ENGINES` and one of its ``precision`` s."""
+    """A runtime of the network: an ``engine`` of :data:`PRECISIONS` and one of its precisions."""
 
     engine: str = "torch"
     precision: str = "fp32"
 
     def __post_init__(self) -> None:
-        if self.engine not in ENGINES or self.precision not in ENGINES[self.engine][0]:
+        if self.precision not in PRECISIONS.get(self.engine, ()):
             raise LBurstValueError(f"unknown runtime {self.name!r}: use one of {', '.join(RUNTIMES)}")
 
     @classmethod
@@ -77,7 +83,7 @@ class Runtime:
     def modules(self) -> tuple[str, ...]:
         """The packages it needs beyond lburst's own dependencies (NNCF for OpenVINO's int8)."""
         extra = ("nncf",) if (self.engine, self.precision) == ("openvino", "int8") else ()
-        return ENGINES[self.engine][1] + extra
+        return PACKAGES[self.engine] + extra
 
     @property
     def cpu_only(self) -> bool:
@@ -90,7 +96,7 @@ class Runtime:
 
 #: every runtime, in the order of ``scripts/runtime_speed.py``'s table
 ALL_RUNTIMES = tuple(
-    Runtime(engine, precision) for engine, (precisions, _) in ENGINES.items() for precision in precisions
+    Runtime(engine, precision) for engine, precisions in PRECISIONS.items() for precision in precisions
 )
 _BY_NAME = {runtime.name: runtime for runtime in ALL_RUNTIMES}
 #: every runtime name (what ``--runtime`` and ``runtime=`` take, with ``auto``)
