@@ -134,6 +134,11 @@ class InputSource(ABC):
         tells them (a recording's keyframes)."""
         return None
 
+    def known_scene(self) -> Scene | None:
+        """The scene before any image is read (a scene's: its images and positions are known before
+        the features stage), ``None`` where only reading tells it (a recording's keyframes)."""
+        return None
+
     def gnss_track(self) -> GnssTrack | None:
         """The GNSS fixes the input carries (:mod:`lburst.geo`), once read; ``None``: none."""
         return None
@@ -236,6 +241,9 @@ class SceneInput(InputSource):
 
     def known_names(self) -> list[str] | None:
         return self.scene.names
+
+    def known_scene(self) -> Scene | None:
+        return self.scene
 
     def gnss_track(self) -> GnssTrack | None:
         """The EXIF GPS of each image (a burst's: of its middle frame), by the image's name."""

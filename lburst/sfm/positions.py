@@ -32,6 +32,7 @@ from lburst.errors import LBurstValueError
 from lburst.geo.fixes import GnssTrack, drop_jumps, positions_at
 from lburst.geo.frame import GeoOrigin
 from lburst.numbers import check_real
+from lburst.sfm.turns import describe_turns
 
 #: the positions file ``lburst simulate flight`` writes into a scene
 POSITIONS_FILE = "positions.txt"
@@ -302,7 +303,8 @@ def prior_fit(
 
 def describe(data: dict) -> list[str]:
     """Lines that say what :func:`prior_fit`'s ``data`` says: where the positions came from, how
-    many, the origin, how far the model lies from them, then its notes."""
+    many, the origin, the views they show turned against their pairs (``turns``,
+    :mod:`lburst.sfm.turns`), how far the model lies from them, then its notes."""
     origin = data.get("origin")
     where = ""
     if origin:
@@ -313,6 +315,8 @@ def describe(data: dict) -> list[str]:
         )
     how = "held by the mapper" if data.get("used") else "not used"
     lines = [f"positions: {data['images']} of {data['of']} images from {data['source']}{where}; {how}"]
+    if data.get("turns"):
+        lines.append(f"positions: {describe_turns(data['turns'])}")
     fit = data.get("model_to_priors")
     if fit:
         lines.append(

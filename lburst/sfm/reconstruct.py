@@ -19,6 +19,14 @@ input then leaves the same files for other tools (:mod:`lburst.sfm.outputs`): hl
 ``features.h5``, ``matches.h5`` and ``pairs.txt``, ``trajectory.tum`` (and
 ``reference.tum``), ``report.md``.  With ``options.cluster`` the features and matching
 stages run on a Dask cluster (:mod:`lburst.cluster`), started or joined for the run.
+
+With positions (priors), pairs may be planned by them (``pairs='positions'``, the default for a
+scene of more than 20 images with positions), and where they show images turned by more than 90
+degrees against the images they are paired with (the lines of a survey, flown in alternating
+directions), a method with rotation sets extracts with ``rotations=2`` unless its spec sets them
+(:mod:`lburst.sfm.turns`); ``result.json``'s ``positions.turns`` says so.  A scene's images and
+positions are known before its features are computed; a recording's keyframes only once read,
+so a recording with turned pairs has its features computed again with the rotation sets.
 """
 
 from __future__ import annotations
@@ -33,14 +41,14 @@ from lburst.cluster.runner import Runner, open_runner
 from lburst.extras import MissingExtra, check_installed
 from lburst.geo.frame import GeoOrigin
 from lburst.geo.outputs import write_georeferenced
-from lburst.methods import with_default
+from lburst.methods import accepts, with_default
 from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
 from lburst.sfm.feature_stage import utf8
 from lburst.sfm.inputs import InputSource, open_input
 from lburst.sfm.match import feature_keys, match_or_reuse, match_pairs_with_scores, report_stage
 from lburst.sfm.metrics import camera_metrics, evaluate_against_reference, scene_metrics
-from lburst.sfm.options import ReconstructOptions
+from lburst.sfm.options import Pairs, ReconstructOptions
 from lburst.sfm.outputs import write_outputs
 from lburst.sfm.pairs import exhaustive_pairs, make_pairs, pair_plan
 from lburst.sfm.positions import Priors, file_priors, parse_positions, prior_fit
@@ -48,6 +56,7 @@ from lburst.sfm.result import RESULT_FILE, ReconstructionError, ReconstructionRe
 from lburst.sfm.retrieval import retrieval_pairs, vlad
 from lburst.sfm.scene import SceneError
 from lburst.sfm.trust import assess
+from lburst.sfm.turns import TURN_ROTATIONS, describe_turns, find_turns, switch_on
 
 __all__ = [
     "RESULT_FILE",
@@ -87,6 +96,36 @@ def _priors(source: InputSource, scene, opts: ReconstructOptions) -> Priors | No
     return source.gnss_priors(scene, opts.position_std) if opts.input_positions else None
 
 
+def _known(priors: Priors | None) -> np.ndarray | None:
+    """The centres of ``priors`` when at least 2 images have one (pairs by position), else ``None``."""
+    return priors.centres if priors is not None and priors.count >= 2 else None
+
+
+def _planned_pairs(n: int, opts: ReconstructOptions, time_ordered: bool, priors: Priors | None):
+    """The pair plan of ``n`` images and its pairs before retrieval (:func:`lburst.sfm.pairs.make_pairs`)."""
+    centres = _known(priors)
+    plan = pair_plan(n, opts, time_ordered, positions=centres is not None)
+    return plan, make_pairs(n, plan.mode, plan.overlap, centres, plan)
+
+
+def _turns(spec: str, priors: Priors | None, n: int, opts: ReconstructOptions, time_ordered: bool, progress: bool):
+    """``spec`` with rotation sets where the positions show the planned pairs turned
+    (:mod:`lburst.sfm.turns`), and what was found (``None``: nothing turned, or no positions)."""
+    centres = _known(priors)
+    found = (
+        None
+        if centres is None
+        else find_turns(centres, _planned_pairs(n, opts, time_ordered, priors)[1], opts.position_std)
+    )
+    if found is None:
+        return spec, None
+    rotated = with_default(spec, "rotations", TURN_ROTATIONS)
+    found = switch_on(found, str(spec), rotated != spec, accepts(spec, "rotations"))
+    if progress:
+        report_stage(f"positions: {describe_turns(found)}")
+    return rotated, found
+
+
 def _georeferenced(out: Path, origin: GeoOrigin, result: ReconstructionResult) -> dict | None:
     """``OUT/model.las`` and ``OUT/cameras.geojson`` of a model in a GNSS frame
     (:mod:`lburst.geo.outputs`); ``None``, with a note, without the ``geo`` extra."""
@@ -121,6 +160,17 @@ def _reconstruct(
             raise ReconstructionError(str(err)) from err
         if known is not None:
             file_priors(opts.positions, known, opts.position_std)
+    early_priors, turns = None, None
+    try:
+        known_scene = source.known_scene()
+    except SceneError as err:
+        raise ReconstructionError(str(err)) from err
+    if known_scene is not None and len(known_scene.items) >= 2:  # a scene: priors and turns before the features
+        early_priors = _priors(source, known_scene, opts)
+        if opts.pairs == Pairs.POSITIONS and _known(early_priors) is None:
+            make_pairs(len(known_scene.items), Pairs.POSITIONS, 1)  # refused before any feature is computed
+        if extractor is None:
+            method_spec, turns = _turns(method_spec, early_priors, len(known_scene.items), opts, False, opts.progress)
     if opts.single_camera is None:  # one camera shot a recording; a scene's photos may come from several
         opts = replace(opts, single_camera=source.one_camera)
     out = Path(out_dir)
@@ -148,14 +198,21 @@ def _reconstruct(
             raise ReconstructionError(
                 f"{scene_dir}: a reconstruction needs at least 2 images, found {len(scene.items)}"
             )
+        if known_scene is None:  # a recording: its keyframes and their positions are known once read
+            early_priors = _priors(source, scene, opts)
+            if extractor is None:
+                rotated, turns = _turns(method_spec, early_priors, len(scene.items), opts, True, opts.progress)
+                if rotated != method_spec:  # its features again, with the rotation sets
+                    method_spec = rotated
+                    scene, features, source_error = source.read(method_spec, out, opts, extractor, runner).unpack()
         sizes = [(int(f["image_size"][0]), int(f["image_size"][1])) for f in features]
         cams = camera_plan(scene, sizes, opts)
     except SceneError as err:
         raise ReconstructionError(str(err)) from err
     n = len(scene.items)
-    plan = pair_plan(n, opts, source.time_ordered)
+    priors = early_priors
+    plan, pairs = _planned_pairs(n, opts, source.time_ordered, priors)
     mode = plan.mode
-    pairs = make_pairs(n, mode, plan.overlap)
     loop_candidates: set[tuple[int, int]] = set()
     if plan.retrieval and mode == "sequential":
         loops = retrieval_pairs(
@@ -183,7 +240,6 @@ def _reconstruct(
         },
     )
     job = ColmapJob(scene.names, str((out / "images").resolve()), cams.cameras, cams.camera_of_image, colmap_options)
-    priors = _priors(source, scene, opts)
     use_priors = priors is not None and priors.count > 0 and plan.mapper != "global"
     if priors is not None and priors.count and not use_priors:
         priors.notes.append("COLMAP's global mapper takes no priors (--mapper incremental does)")
@@ -228,6 +284,7 @@ def _reconstruct(
         pairs=len(pairs),
         pairing=mode if len(pairs) < n * (n - 1) // 2 else "exhaustive",
         overlap=plan.overlap if mode == "sequential" else None,
+        neighbours=plan.neighbours if mode == "positions" else None,
         loop_candidates=len(loop_candidates),
         matcher=opts.matcher,
         mapper=plan.mapper,
@@ -250,6 +307,7 @@ def _reconstruct(
         centres = {name: -R.T @ t for name, (R, t) in result.poses.items()}
         alignment = summary.get("prior_alignment") if not colmap_error else None
         result.positions = prior_fit(priors, scene.names, centres, use_priors, opts.position_std, alignment)
+        result.positions["turns"] = turns
         if result.positions["in_frame"] and priors.origin is not None and not colmap_error:
             result.positions["georeferenced"] = _georeferenced(out, priors.origin, result)
     result.metrics.update(camera_metrics(result.cameras))
