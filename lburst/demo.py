@@ -145,7 +145,7 @@ def run_demo(
         # sequential pairs along the trajectory
         result = reconstruct_scene(
             out / "scene",
-            str(method),
+            method,
             out / label,
             ReconstructOptions(
                 camera="reference", fix_intrinsics=True, pairs="sequential", overlap=overlap, matcher=matcher

@@ -142,7 +142,7 @@ def run_one(scene: Path, method: Method, out: Path, force: bool, options: dict[s
             return {**row, **previous.metrics, "registered": len(previous.registered), "error": colmap_error(previous)}
     try:
         # vision alone: a photo set's EXIF GPS (lund's) would otherwise be held as priors
-        result = reconstruct_scene(scene, spec, out, ReconstructOptions(**{"input_positions": False, **options}))
+        result = reconstruct_scene(scene, method, out, ReconstructOptions(**{"input_positions": False, **options}))
         with atomic_path(out / KEY_FILE) as tmp:
             tmp.write_text(json.dumps(key, indent=1))
     except ReconstructionError as err:

@@ -7,10 +7,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from lburst.cli.options import add_cluster_argument, add_recording_arguments, recording_options
+from lburst.cli.options import add_cluster_argument, add_recording_arguments, parse_method, recording_options
 from lburst.cli.reconstruct_options import add_reconstruct_arguments, reconstruct_options
 from lburst.errors import RunFailed
-from lburst.methods import check
 from lburst.sfm.metrics import markdown_table
 from lburst.sfm.options import ReconstructOptions
 from lburst.sfm.positions import describe
@@ -28,6 +27,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--method",
+        type=parse_method,
         default="lburst",
         help="feature method spec (lburst, sift, merge+sift, r2d2:CKPT, ...); a learned method keeps 8000"
         " keypoints per image of a scene and 4000 of a recording unless the spec sets top_k=N",
@@ -46,7 +46,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    check(args.method)  # a bad spec or option is one line before a cluster starts or a burst is read
+    args.method.check()  # a bad spec or option is one line before a cluster starts or a burst is read
     result = reconstruct_scene(
         args.scene,
         args.method,

@@ -45,7 +45,6 @@ __all__ = [
     "methods",
     "register",
     "weights_file",
-    "with_default",
 ]
 
 
@@ -72,13 +71,3 @@ def create(method: str | Method, **options: Any) -> Extractor:
     those in the spec of the method that runs on the burst (inside any wrappers).
     """
     return Method.of(method).create(**options)
-
-
-def with_default(method: str | Method, option: str, value: Any) -> str | Method:
-    """:meth:`Method.with_default` of ``method``, of the kind given: a :class:`Method` for a
-    :class:`Method`, a spec for a spec (the spec itself where nothing is added)."""
-    parsed = Method.of(method)
-    new = parsed.with_default(option, value)
-    if isinstance(method, Method):
-        return new
-    return method if new == parsed else str(new)

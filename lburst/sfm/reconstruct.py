@@ -41,7 +41,7 @@ from lburst.cluster.runner import Runner, open_runner
 from lburst.extras import MissingExtra, check_installed
 from lburst.geo.frame import GeoOrigin
 from lburst.geo.outputs import write_georeferenced
-from lburst.methods import accepts, with_default
+from lburst.methods import Method
 from lburst.sfm.cameras import camera_plan
 from lburst.sfm.colmap import ColmapError, ColmapJob, ColmapOptions, run_job_subprocess
 from lburst.sfm.feature_stage import utf8
@@ -70,22 +70,23 @@ __all__ = [
 
 def reconstruct_scene(
     scene_dir: str | Path,
-    method_spec: str,
+    method: str | Method,
     out_dir: str | Path,
     options: ReconstructOptions | None = None,
     extractor=None,
 ) -> ReconstructionResult:
-    """Reconstruct ``scene_dir`` with features ``method_spec``; files and ``result.json`` go to ``out_dir``.
+    """Reconstruct ``scene_dir`` with features of ``method`` (a :class:`lburst.methods.Method` or its
+    spec); files and ``result.json`` go to ``out_dir``.
 
     ``options``: how (``None``: the defaults).  ``extractor`` (optional) is used instead of
-    creating one from the spec.  Raises :class:`ReconstructionError` for a scene that cannot
+    creating one from the method.  Raises :class:`ReconstructionError` for a scene that cannot
     be used (not a folder, no images, a single image, an unreadable burst); a COLMAP failure
     is returned as a result with ``status`` :attr:`Status.COLMAP_FAILED` and ``error`` set.
     """
     opts = options or ReconstructOptions()
     check_installed("pycolmap", "reconstruction")  # without lburst[sfm]: one line before any work
     with open_runner(opts.cluster) as runner:
-        return _reconstruct(scene_dir, method_spec, out_dir, opts, extractor, runner)
+        return _reconstruct(scene_dir, Method.of(method), out_dir, opts, extractor, runner)
 
 
 def _priors(source: InputSource, scene, opts: ReconstructOptions) -> Priors | None:
@@ -108,8 +109,8 @@ def _planned_pairs(n: int, opts: ReconstructOptions, time_ordered: bool, priors:
     return plan, make_pairs(n, plan.mode, plan.overlap, centres, plan)
 
 
-def _turns(spec: str, priors: Priors | None, n: int, opts: ReconstructOptions, time_ordered: bool, progress: bool):
-    """``spec`` with rotation sets where the positions show the planned pairs turned
+def _turns(method: Method, priors: Priors | None, n: int, opts: ReconstructOptions, time_ordered: bool, progress: bool):
+    """``method`` with rotation sets where the positions show the planned pairs turned
     (:mod:`lburst.sfm.turns`), and what was found (``None``: nothing turned, or no positions)."""
     centres = _known(priors)
     found = (
@@ -118,9 +119,9 @@ def _turns(spec: str, priors: Priors | None, n: int, opts: ReconstructOptions, t
         else find_turns(centres, _planned_pairs(n, opts, time_ordered, priors)[1], opts.position_std)
     )
     if found is None:
-        return spec, None
-    rotated = with_default(spec, "rotations", TURN_ROTATIONS)
-    found = switch_on(found, str(spec), rotated != spec, accepts(spec, "rotations"))
+        return method, None
+    rotated = method.with_default("rotations", TURN_ROTATIONS)
+    found = switch_on(found, str(method), rotated != method, method.accepts("rotations"))
     if progress:
         report_stage(f"positions: {describe_turns(found)}")
     return rotated, found
@@ -147,11 +148,11 @@ def _checks(summary: dict, names: list[str], ordered: bool, priors, result, opts
 
 
 def _reconstruct(
-    scene_dir: str | Path, method_spec: str, out_dir: str | Path, opts: ReconstructOptions, extractor, runner: Runner
+    scene_dir: str | Path, method: Method, out_dir: str | Path, opts: ReconstructOptions, extractor, runner: Runner
 ) -> ReconstructionResult:
     source = open_input(scene_dir, opts.recording)  # the one question about the kind of input
     if extractor is None:  # a given extractor keeps its own top_k
-        method_spec = with_default(method_spec, "top_k", source.keypoints)
+        method = method.with_default("top_k", source.keypoints)
     if opts.positions is not None:  # a bad file, or one naming no image, is refused before the features are computed
         parse_positions(opts.positions)
         try:
@@ -170,7 +171,7 @@ def _reconstruct(
         if opts.pairs == Pairs.POSITIONS and _known(early_priors) is None:
             make_pairs(len(known_scene.items), Pairs.POSITIONS, 1)  # refused before any feature is computed
         if extractor is None:
-            method_spec, turns = _turns(method_spec, early_priors, len(known_scene.items), opts, False, opts.progress)
+            method, turns = _turns(method, early_priors, len(known_scene.items), opts, False, opts.progress)
     if opts.single_camera is None:  # one camera shot a recording; a scene's photos may come from several
         opts = replace(opts, single_camera=source.one_camera)
     out = Path(out_dir)
@@ -181,13 +182,13 @@ def _reconstruct(
     if not utf8(str(out.resolve())):
         raise ReconstructionError(f"{out!s}: the output path is not valid UTF-8, which COLMAP cannot use")
     try:
-        scene, features, source_error = source.read(method_spec, out, opts, extractor, runner).unpack()
+        scene, features, source_error = source.read(method, out, opts, extractor, runner).unpack()
         if source_error and len(scene.items) < 2:  # nothing to reconstruct: say why in result.json too
             out.mkdir(parents=True, exist_ok=True)
             read = f"{len(scene.items)} keyframe(s) read before the recording stopped; no model"
             ReconstructionResult(
                 str(scene_dir),
-                method_spec,
+                str(method),
                 str(out),
                 scene.names,
                 status=Status.SOURCE_FAILED,
@@ -201,10 +202,10 @@ def _reconstruct(
         if known_scene is None:  # a recording: its keyframes and their positions are known once read
             early_priors = _priors(source, scene, opts)
             if extractor is None:
-                rotated, turns = _turns(method_spec, early_priors, len(scene.items), opts, True, opts.progress)
-                if rotated != method_spec:  # its features again, with the rotation sets
-                    method_spec = rotated
-                    scene, features, source_error = source.read(method_spec, out, opts, extractor, runner).unpack()
+                rotated, turns = _turns(method, early_priors, len(scene.items), opts, True, opts.progress)
+                if rotated != method:  # its features again, with the rotation sets
+                    method = rotated
+                    scene, features, source_error = source.read(method, out, opts, extractor, runner).unpack()
         sizes = [(int(f["image_size"][0]), int(f["image_size"][1])) for f in features]
         cams = camera_plan(scene, sizes, opts)
     except SceneError as err:
@@ -248,7 +249,7 @@ def _reconstruct(
         job.position_std = opts.position_std
     job_dir = out / "colmap"
     job_dir.mkdir(parents=True, exist_ok=True)
-    result = ReconstructionResult(str(scene.root), method_spec, str(out), scene.names)
+    result = ReconstructionResult(str(scene.root), str(method), str(out), scene.names)
     summary: dict = {"converged": False, "registered": {}, "num_points3D": 0}
     colmap_error = None
     for attempt in range(2):
