@@ -152,11 +152,11 @@ def test_no_cycle_through_the_imports_that_run():
 
 
 def test_the_reconstruct_pipeline_is_split_by_concept():
-    """``sfm/reconstruct.py`` runs the stages; options, result, cameras, features and pairs are
-    their own modules (issue 28)."""
+    """``sfm/reconstruct.py`` runs the named stages; the input and its features (``read``), pairs,
+    matching, verification and mapping (``mapping``), options and result are their own modules."""
     lines = len((ROOT / "sfm" / "reconstruct.py").read_text(encoding="utf-8").splitlines())
     assert lines <= 300, f"lburst/sfm/reconstruct.py has {lines} lines"
-    for module in ("options", "inputs", "result", "cameras", "pairs", "match"):
+    for module in ("options", "read", "result", "mapping", "pairs", "match"):
         assert f"lburst.sfm.{module}" in import_graph()["lburst.sfm.reconstruct"]
 
 

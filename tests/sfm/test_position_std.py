@@ -4,7 +4,7 @@ import pytest
 
 from lburst.cli import main
 from lburst.scenes.night_flight import NightFlightConfig, gnss_positions, make_night_flight
-from lburst.sfm import reconstruct as reconstruct_module
+from lburst.sfm import mapping as mapping_module
 from lburst.sfm.colmap import ColmapError, ColmapJob
 from lburst.sfm.positions import write_positions
 
@@ -26,7 +26,7 @@ def test_the_position_std_given_on_the_command_line_is_the_std_of_the_priors_col
     def stop(job_dir, **_):  # the job as written for the COLMAP child; COLMAP itself need not run
         raise ColmapError("stopped before COLMAP")
 
-    monkeypatch.setattr(reconstruct_module, "run_job_subprocess", stop)
+    monkeypatch.setattr(mapping_module, "run_job_subprocess", stop)
     out = tmp_path / "out"
     argv = ["reconstruct", str(scene), "--method", "sift,max_features=300", "--out", str(out), "--threads", "1"]
     assert main([*argv, "--positions", str(scene / "gnss.txt"), "--position-std", std]) == 1  # COLMAP "failed"

@@ -166,7 +166,7 @@ def test_a_good_model_passes_its_checks_and_says_so_last(flight, tmp_path, capsy
 
 def test_a_folded_model_exits_1_and_says_why_in_its_last_line_report_and_result(flight, tmp_path, capsys, monkeypatch):
     """COLMAP's summary of the same images, but two of them hold a handful of 3D points."""
-    from lburst.sfm import reconstruct as module
+    from lburst.sfm import mapping as module  # the stage that runs the COLMAP child
 
     real = module.run_job_subprocess
 
