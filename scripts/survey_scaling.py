@@ -105,17 +105,19 @@ def child_reconstruct(args: argparse.Namespace) -> dict:
     """``lburst reconstruct`` of scene ``args.n`` with ``args.mapper`` on the stored features, by stage."""
     import torch
 
+    import lburst.sfm.mapping as mapping
+    import lburst.sfm.read as read
     import lburst.sfm.reconstruct as rec
     from lburst.sfm.options import ReconstructOptions
 
     torch.set_num_threads(args.threads)
     pairs, matches, colmap = Stage(), Stage(), Stage()
-    rec.pair_plan, rec.make_pairs = pairs.wrap(rec.pair_plan), pairs.wrap(rec.make_pairs)
-    rec.vlad, rec.retrieval_pairs = pairs.wrap(rec.vlad), pairs.wrap(rec.retrieval_pairs)  # as reconstruct calls them
-    rec.match_pairs_with_scores = matches.wrap(rec.match_pairs_with_scores)
+    read.pair_plan, read.make_pairs = pairs.wrap(read.pair_plan), pairs.wrap(read.make_pairs)  # as the stages call them
+    rec.vlad, rec.retrieval_pairs = pairs.wrap(rec.vlad), pairs.wrap(rec.retrieval_pairs)
+    rec.match_or_reuse = matches.wrap(rec.match_or_reuse)
     lines: list[str] = []
-    run_job = rec.run_job_subprocess
-    rec.run_job_subprocess = colmap.wrap(lambda job_dir, report=None: run_job(job_dir, report=lines.append))
+    run_job = mapping.run_job_subprocess
+    mapping.run_job_subprocess = colmap.wrap(lambda job_dir, report=None: run_job(job_dir, report=lines.append))
     gnss = args.mapper == WITH_GNSS
     options = ReconstructOptions(
         mapper="incremental" if gnss else args.mapper,
