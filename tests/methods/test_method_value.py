@@ -226,6 +226,8 @@ def test_new_methods_from_a_method_leave_it_as_it_was():
     assert str(lburst.with_option("frame_order", "published")) == "merge+lburst,frame_order=published"
     assert str(lburst.with_weights("w.pt")) == "merge+lburst:w.pt"
     assert Method.parse("lburst:x.pt").with_weights("w.pt") == Method.parse("lburst:x.pt")  # its own checkpoint wins
+    # the weights go to the method's checkpoint, not after its options (the spec read 'lburst,top_k=5:w.pt')
+    assert str(Method.parse("lburst,top_k=5").with_weights("w.pt")) == "lburst:w.pt,top_k=5"
     assert str(lburst.with_given("top_k", 300, "--top-k")) == "merge+lburst,top_k=300"
     assert str(lburst) == "merge+lburst"
     with pytest.raises(ValueError, match=r"^--top-k 300 and top_k=7 in method spec 'lburst,top_k=7' disagree"):
