@@ -17,6 +17,7 @@ network (``fast=False``) runs it as published.  :func:`open_backend` builds the 
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from pathlib import Path
 
 import torch
@@ -30,7 +31,7 @@ from lburst.model.runtimes import Calibration, Runner, Runtime, inference_form, 
 Maps = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
 
 
-class Backend:
+class Backend(ABC):
     """Runs the network (see the module docstring).  ``name``: the runtime's name (what
     :attr:`lburst.LBurst.runtime` says); ``frames``: the bursts' frame count N; ``net``: the torch
     network, if any; ``device``: where the tensors it returns are."""
@@ -44,19 +45,19 @@ class Backend:
         self._variants: dict[str, nn.Module] = {}  # the torch network's inference form by precision
 
     @property
+    @abstractmethod
     def runner(self) -> Runner:
         """What runs the network in fp32: ``x -> maps``."""
-        raise NotImplementedError
 
     @property
+    @abstractmethod
     def cpu_only(self) -> bool:
         """Whether the runner runs on the CPU only (it is not a torch module)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def channels_last(self, precision: str) -> bool:
         """Whether the levels of an extraction in ``precision`` run through a torch module (which
         wants channels-last input)."""
-        raise NotImplementedError
 
     def run(self, x: torch.Tensor, precision: str = "fp32") -> Maps:
         """The maps of ``x``; a ``precision`` other than fp32 runs the torch network's inference form

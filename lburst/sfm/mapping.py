@@ -206,11 +206,12 @@ def _metrics(features: list[Features], mapped: Mapped, placed: Placed, job_dir: 
         pairs=len(pairs),
         pairing=plan.mode if len(pairs) < n * (n - 1) // 2 else "exhaustive",
         overlap=plan.overlap if plan.mode == "sequential" else None,
-        neighbours=plan.neighbours if plan.mode == "positions" else None,
         loop_candidates=len(mapped.matched.loop_candidates),
         matcher=opts.matcher,
         mapper=plan.mapper,
     )
+    if plan.mode == "positions":
+        metrics["neighbours"] = plan.neighbours
     if placed.camera is not None:
         metrics["camera"] = placed.camera
     if plan.near and not mapped.error:
