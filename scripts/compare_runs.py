@@ -29,15 +29,21 @@ SKIPPED_SUFFIXES = {".log", ".lock"}
 SKIPPED_NAMES = {"stages.txt"}
 
 
-def _without_volatile(value, root: str):
-    """``value`` without the :data:`VOLATILE` keys (and ``*_seconds``), the folder's own path as ``<ROOT>``."""
+def _without_volatile(value, root: Path):
+    """``value`` without the :data:`VOLATILE` keys (and ``*_seconds``), the folder's own path, absolute
+    or as given (relative to the working directory), as ``<ROOT>``."""
     if isinstance(value, dict):
         return {
             k: _without_volatile(v, root) for k, v in value.items() if k not in VOLATILE and not k.endswith("_seconds")
         }
     if isinstance(value, list):
         return [_without_volatile(v, root) for v in value]
-    return value.replace(root, "<ROOT>") if isinstance(value, str) else value
+    if not isinstance(value, str):
+        return value
+    for form in dict.fromkeys((str(root.resolve()), str(root))):  # the absolute form first
+        if form not in (".", ""):
+            value = value.replace(form, "<ROOT>")
+    return value
 
 
 def _same_array(x: np.ndarray, y: np.ndarray) -> bool:
@@ -66,7 +72,7 @@ def compare_files(a: Path, b: Path, roots: tuple[Path, Path]) -> tuple[int, list
             k for k in keys if k not in x or k not in y or not _same_array(np.asarray(x[k]), np.asarray(y[k]))
         ]
     if a.suffix == ".json":
-        x, y = (_without_volatile(json.loads(p.read_text()), str(r.resolve())) for p, r in zip((a, b), roots))
+        x, y = (_without_volatile(json.loads(p.read_text()), r) for p, r in zip((a, b), roots))
         same = x == y
         return 1, [] if same else ["content"]
     return 1, [] if a.read_bytes() == b.read_bytes() else ["bytes"]

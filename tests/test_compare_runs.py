@@ -44,3 +44,16 @@ def test_a_changed_array_or_a_missing_file_is_named(tmp_path):
     lines = done.stdout.splitlines()
     assert "features/a.npz: keypoints differs" in lines and "features.h5: a.png/keypoints differs" in lines
     assert f"pairs.txt: only in {a}" in lines
+
+
+def test_runs_started_with_relative_folders_are_equal(tmp_path):
+    """``lburst reconstruct --out runs/a`` records the folder as given: compared from the folder
+    above, ``runs/a`` and ``runs/b`` are each run's own path."""
+    kp = np.arange(6, dtype=np.float32).reshape(3, 2)
+    for name in ("a", "b"):
+        root = _run_folder(tmp_path / "runs" / name, kp, 1.0)
+        (root / "result.json").write_text(json.dumps({"out_dir": f"runs/{name}", "names": ["0000.png"]}))
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "runs/a", "runs/b"], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert done.returncode == 0 and done.stdout.strip().endswith("3 items compared, 0 differ"), done.stdout
