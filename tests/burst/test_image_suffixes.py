@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from lburst import calibration
 from lburst.burst import io
 from lburst.burst.sources import RecordingOptions, is_recording
-from lburst.model import runtimes
 from lburst.sfm import scene as scene_module
 from lburst.train import data
 
@@ -18,7 +18,7 @@ def _frame(seed: int) -> np.ndarray:
 
 def test_every_listing_uses_the_one_list():
     assert ".webp" in io.IMAGE_SUFFIXES
-    for module in (scene_module, runtimes, data):
+    for module in (scene_module, calibration, data):
         assert module.IMAGE_SUFFIXES is io.IMAGE_SUFFIXES, module.__name__
 
 
