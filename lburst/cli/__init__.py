@@ -33,6 +33,7 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("demo",), "lburst.cli.demo", "synthetic night flight: LBurst vs SIFT, with a report"),
     (("export", "onnx"), "lburst.cli.export_onnx", "export a network to ONNX"),
     (("export", "whitened"), "lburst.cli.export_whitened", "weights with descriptor whitening from training photos"),
+    (("export", "weights"), "lburst.cli.export_weights", "a training run's checkpoint as shippable weights"),
 ]
 
 
